@@ -1,0 +1,43 @@
+#!/usr/bin/env bash
+# Odometry accuracy on the real TUM sequences in ../shared/data/tum (with motion-capture
+# ground truth), translational RPE at a delta of one frame (TUM definition, as evo).
+#
+# Prints each result next to the targets of the foundation issue (10 % below the
+# authors' original implementation measured on this machine, max no higher) and fails
+# only on a regression beyond the recorded guard values (docs/evaluation.md): the
+# targets themselves are reported, not asserted, so a miss is visible rather than hidden.
+# Then cross-checks `mrsmap eval` against evo on one trajectory (needs `pip install evo`).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+DATA=${MRSMAP_TUM:-../shared/data/tum}
+BIN=target/release/mrsmap
+[ -d "$DATA" ] || { echo "accuracy: $DATA not found (set MRSMAP_TUM)"; exit 1; }
+cargo build --release --quiet
+OUT=$(mktemp -d)
+trap 'rm -rf "$OUT"' EXIT
+status=0
+#        sequence            camera  flags   target median/max  guard median/max
+while read -r seq cam flags tmed tmax gmed gmax; do
+  [ "$flags" = "-" ] && flags=""
+  traj="$OUT/$seq${flags// /}.txt"
+  $BIN odometry --dataset "$DATA/$seq" --camera "robot_config/cameras/$cam.toml" --out "$traj" $flags > "$OUT/log" 2>&1 \
+    || { cat "$OUT/log"; exit 1; }
+  read -r med max < <($BIN eval rpe "$DATA/$seq/groundtruth.txt" "$traj" | awk '/median/ {m=$2} /max/ {x=$2} END {print m, x}')
+  verdict=$(awk -v m="$med" -v x="$max" -v tm="$tmed" -v tx="$tmax" 'BEGIN {
+    if (tm == "-") { print "(no figure of the original to compare)"; exit }
+    printf "%s median (target <= %s), %s max (target <= %s)", (m <= tm ? "meets" : "MISSES"), tm, (x <= tx ? "meets" : "MISSES"), tx }')
+  printf '%-20s %-7s RPE median %6.3f mm  max %7.3f mm   %s\n' "$seq" "${flags:-VGA}" "$med" "$max" "$verdict"
+  if awk -v m="$med" -v x="$max" -v gm="$gmed" -v gx="$gmax" 'BEGIN {exit !(m > gm || x > gx)}'; then
+    echo "  REGRESSION: guard is median <= $gmed mm, max <= $gmax mm"
+    status=1
+  fi
+  grep -q " 0 failed, 0 skipped" "$OUT/log" || { echo "  frames failed or skipped:"; grep odometry: "$OUT/log"; status=1; }
+done <<'TABLE'
+fr3_teddy_first200 tum_fr3 -      2.43 15.2 2.15 15.8
+fr3_teddy_first200 tum_fr3 --qvga - - 2.35 15.0
+fr1_xyz_first37    tum_fr1 -      2.55 6.0  2.75 5.8
+fr1_xyz_first37    tum_fr1 --qvga - - 2.70 5.6
+fr1_desk_9frames   tum_fr1 -      - -       2.60 5.0
+TABLE
+python3 scripts/evo_crosscheck.py "$BIN" "$DATA/fr3_teddy_first200/groundtruth.txt" "$OUT/fr3_teddy_first200.txt"
+exit $status

@@ -1,0 +1,6 @@
+//! The command-line jobs: they read files, time work, show progress and print reports.
+//! The only place besides `main.rs` that talks to the user.
+
+pub mod bench;
+pub mod odometry;
+pub mod report;

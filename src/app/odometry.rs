@@ -1,0 +1,267 @@
+//! `mrsmap odometry`: frame-to-frame odometry over a TUM RGB-D dataset.
+
+use super::report::{percentile, progress_bar};
+use crate::eval::{ErrorStats, associate, rpe_translation};
+use crate::geometry::Pose;
+use crate::io::camera_file::read_camera;
+use crate::io::frames::{FrameLoader, LoadError};
+use crate::io::image::ImageError;
+use crate::io::tum::{Trajectory, TumDataset, format_pose_line, format_stamp};
+use crate::odometry::{Odometry, OdometryParams, TrackOutcome};
+use anyhow::{Context, Result, bail};
+use std::fmt::Write as _;
+use std::io::Write as _;
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// What to run.
+#[derive(Debug, Clone)]
+pub struct OdometryJob {
+    /// Dataset folder (TUM layout).
+    pub dataset: PathBuf,
+    /// Camera file.
+    pub camera: PathBuf,
+    /// Output trajectory (TUM format).
+    pub out: PathBuf,
+    /// Optional per-frame timings CSV.
+    pub timings: Option<PathBuf>,
+    /// Worker threads (default: all cores).
+    pub threads: Option<usize>,
+    /// Stop after this many frames.
+    pub max_frames: Option<usize>,
+    /// Halve images and intrinsics on load.
+    pub qvga: bool,
+    /// Algorithm parameters.
+    pub params: OdometryParams,
+}
+
+/// What happened.
+#[derive(Debug, Clone)]
+pub struct OdometrySummary {
+    /// Frames processed (maps built).
+    pub frames: usize,
+    /// Frames registered to their predecessor.
+    pub registered: usize,
+    /// Registrations that failed (pose held).
+    pub failed: usize,
+    /// Frames skipped because they could not be read.
+    pub skipped: usize,
+    /// Map-building times (ms).
+    pub build_ms: Vec<f64>,
+    /// Registration times (ms).
+    pub register_ms: Vec<f64>,
+    /// RPE against ground truth, if the dataset has it.
+    pub rpe: Option<ErrorStats>,
+}
+
+/// The pose of the first frame: ground truth interpolated at its depth stamp if the
+/// dataset has it (the nearest sample if the frame is just outside the span).
+fn initial_pose(dataset: &TumDataset, stamp_ns: u64, notes: &mut String) -> Pose {
+    let Some(gt) = &dataset.groundtruth else {
+        let _ = writeln!(notes, "no groundtruth.txt: trajectory starts at identity");
+        return Pose::identity();
+    };
+    let stamp = stamp_ns as f64 * 1e-9;
+    if let Some(p) = gt.interpolate(stamp, 0.1) {
+        let _ = writeln!(notes, "starts at the ground-truth pose interpolated at {}", format_stamp(stamp_ns));
+        return p;
+    }
+    match gt.nearest(stamp) {
+        Some((p, dt)) if dt < 1.0 => {
+            let _ = writeln!(
+                notes,
+                "first frame is {dt:.3} s outside the ground truth: starts at the nearest ground-truth pose"
+            );
+            p
+        }
+        _ => {
+            let _ = writeln!(notes, "first frame is far from any ground-truth pose: trajectory starts at identity");
+            Pose::identity()
+        }
+    }
+}
+
+/// What a run accumulates frame by frame.
+struct Record {
+    trajectory: Vec<(u64, Pose)>,
+    comments: String,
+    timings: String,
+    summary: OdometrySummary,
+}
+
+impl Record {
+    fn new(frames: usize) -> Self {
+        Record {
+            trajectory: Vec::with_capacity(frames),
+            comments: String::new(),
+            timings: String::from("stamp,build_ms,register_ms,associations,iterations\n"),
+            summary: OdometrySummary {
+                frames: 0,
+                registered: 0,
+                failed: 0,
+                skipped: 0,
+                build_ms: vec![],
+                register_ms: vec![],
+                rpe: None,
+            },
+        }
+    }
+
+    /// A frame that could not be used: warn, note it in the trajectory, count it.
+    fn skip(&mut self, bar: &indicatif::ProgressBar, stamp_ns: u64, why: &dyn std::fmt::Display) {
+        bar.suspend(|| eprintln!("warning: skipping frame {}: {why}", format_stamp(stamp_ns)));
+        let _ = writeln!(self.comments, "skipped {}: {why}", format_stamp(stamp_ns));
+        self.summary.skipped += 1;
+    }
+
+    fn frame(
+        &mut self,
+        bar: &indicatif::ProgressBar,
+        stamp_ns: u64,
+        ms: (f64, f64),
+        outcome: TrackOutcome,
+        pose: Pose,
+    ) {
+        let s = &mut self.summary;
+        s.frames += 1;
+        s.build_ms.push(ms.0);
+        let (assoc, iters) = match outcome {
+            TrackOutcome::First => (0, 0),
+            TrackOutcome::Tracked(r) => {
+                s.registered += 1;
+                s.register_ms.push(ms.1);
+                (r.associations, r.lm_iterations + r.newton_iterations)
+            }
+            TrackOutcome::Failed(e) => {
+                s.failed += 1;
+                s.register_ms.push(ms.1);
+                let stamp = format_stamp(stamp_ns);
+                bar.suspend(|| eprintln!("warning: frame {stamp}: registration failed ({e}); pose held"));
+                let _ = writeln!(self.comments, "registration failed at {stamp}: {e}; pose held");
+                (0, 0)
+            }
+        };
+        let _ = writeln!(self.timings, "{},{:.3},{:.3},{assoc},{iters}", format_stamp(stamp_ns), ms.0, ms.1);
+        self.trajectory.push((stamp_ns, pose));
+    }
+}
+
+/// Runs odometry over the dataset, writes the trajectory (and timings) and returns a summary.
+pub fn run(job: &OdometryJob) -> Result<OdometrySummary> {
+    let camera = read_camera(&job.camera)?;
+    let dataset =
+        TumDataset::open(&job.dataset).with_context(|| format!("opening dataset {}", job.dataset.display()))?;
+    let mut frames = dataset.frames.clone();
+    if let Some(n) = job.max_frames {
+        frames.truncate(n);
+    }
+    if frames.is_empty() {
+        bail!("no frames to process");
+    }
+    let mut loader = FrameLoader::new(camera, job.qvga);
+    let cam = loader.camera();
+    let mut notes = String::new();
+    let start = initial_pose(&dataset, frames[0].depth_stamp_ns, &mut notes);
+    let mut odometry = Odometry::new(job.params, cam.width as usize, cam.height as usize, start)?;
+    let mut pool = rayon::ThreadPoolBuilder::new();
+    if let Some(t) = job.threads {
+        pool = pool.num_threads(t);
+    }
+    let pool = pool.build().context("starting the thread pool")?;
+    let bar = progress_bar(frames.len() as u64, "odometry");
+    let mut rec = Record::new(frames.len());
+    for entry in &frames {
+        bar.inc(1);
+        let frame = match loader.load(entry) {
+            Ok(f) => f,
+            Err(e) => {
+                if rec.summary.frames == 0 && matches!(e, LoadError::Image(ImageError::Size { .. })) {
+                    bail!("{e}\n(does the camera file {} match this dataset?)", job.camera.display());
+                }
+                rec.skip(&bar, entry.depth_stamp_ns, &e);
+                continue;
+            }
+        };
+        let t0 = Instant::now();
+        let built = pool.install(|| odometry.build(&frame));
+        let t1 = Instant::now();
+        if let Err(e) = built {
+            rec.skip(&bar, entry.depth_stamp_ns, &e);
+            continue;
+        }
+        let outcome = pool.install(|| odometry.track());
+        let t2 = Instant::now();
+        let ms = ((t1 - t0).as_secs_f64() * 1e3, (t2 - t1).as_secs_f64() * 1e3);
+        rec.frame(&bar, entry.depth_stamp_ns, ms, outcome, odometry.world_from_camera());
+    }
+    bar.finish_and_clear();
+    if rec.summary.frames == 0 {
+        bail!("no frame of {} could be processed", job.dataset.display());
+    }
+    write_trajectory(job, &rec.trajectory, &notes, &rec.comments)?;
+    if let Some(path) = &job.timings {
+        std::fs::write(path, &rec.timings).with_context(|| format!("writing {}", path.display()))?;
+    }
+    let mut s = rec.summary;
+    if let Some(gt) = &dataset.groundtruth {
+        let est = Trajectory {
+            stamps: rec.trajectory.iter().map(|(t, _)| *t as f64 * 1e-9).collect(),
+            poses: rec.trajectory.iter().map(|(_, p)| *p).collect(),
+        };
+        if let Ok((r, e)) = associate(gt, &est, 0.02)
+            && let Ok(errors) = rpe_translation(&r, &e, 1)
+            && !errors.is_empty()
+        {
+            s.rpe = Some(ErrorStats::of(&errors));
+        }
+    }
+    Ok(s)
+}
+
+fn write_trajectory(job: &OdometryJob, trajectory: &[(u64, Pose)], notes: &str, comments: &str) -> Result<()> {
+    let mut text = String::new();
+    let _ = writeln!(
+        text,
+        "# mrsmap odometry {}: world_from_camera, stamped with depth timestamps",
+        env!("CARGO_PKG_VERSION")
+    );
+    let _ = writeln!(
+        text,
+        "# dataset {} camera {}{}",
+        job.dataset.display(),
+        job.camera.display(),
+        if job.qvga { " (halved: QVGA)" } else { "" }
+    );
+    for line in notes.lines().chain(comments.lines()) {
+        let _ = writeln!(text, "# {line}");
+    }
+    text.push_str("# timestamp tx ty tz qx qy qz qw\n");
+    for (stamp, pose) in trajectory {
+        let _ = writeln!(text, "{}", format_pose_line(*stamp, pose));
+    }
+    let mut f = std::fs::File::create(&job.out).with_context(|| format!("creating {}", job.out.display()))?;
+    f.write_all(text.as_bytes()).with_context(|| format!("writing {}", job.out.display()))?;
+    Ok(())
+}
+
+/// Prints the summary.
+pub fn print_summary(job: &OdometryJob, s: &OdometrySummary) {
+    println!("odometry: {} frames, {} registered, {} failed, {} skipped", s.frames, s.registered, s.failed, s.skipped);
+    let line = |name: &str, v: &[f64]| {
+        if !v.is_empty() {
+            println!("  {name:<13} median {:6.2} ms   p99 {:6.2} ms", percentile(v, 0.5), percentile(v, 0.99));
+        }
+    };
+    line("map building", &s.build_ms);
+    line("registration", &s.register_ms);
+    println!("  trajectory → {}", job.out.display());
+    if let Some(r) = &s.rpe {
+        println!(
+            "  RPE vs ground truth (delta 1 frame, {} pairs): median {:.2} mm, max {:.2} mm, RMSE {:.2} mm",
+            r.count,
+            r.median * 1e3,
+            r.max * 1e3,
+            r.rmse * 1e3
+        );
+    }
+}

@@ -1,0 +1,99 @@
+//! Per-pixel viewing rays, computed once per camera and reused for every frame.
+//!
+//! Back-projection of pixel `(u, v)` with depth `z` is `z · (x_n, y_n, 1)` where
+//! `(x_n, y_n)` is the undistorted normalised ray. The table also caches which of the
+//! six view-direction axes (§3.1: ±x, ±y, ±z) the ray falls under, because it depends on
+//! the ray only and not on the depth.
+
+use crate::geometry::{CameraError, CameraModel};
+
+/// `cos(67.5°)`: a view direction contributes to every surfel whose axis is within
+/// 67.5° of it when view directions are smoothed (§3.1).
+pub const VIEW_DIR_SMOOTH_COS: f32 = 0.382_683_43;
+
+/// One pixel's ray.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct PixelRay {
+    /// Normalised ray `x / z`.
+    pub x: f32,
+    /// Normalised ray `y / z`.
+    pub y: f32,
+    /// `x² + y² + 1`: squared range = `z² · range2_factor`.
+    pub range2_factor: f32,
+    /// Index of the view-direction axis closest to the ray (0 +x, 1 −x, 2 +y, 3 −y, 4 +z, 5 −z).
+    pub best_dir: u8,
+    /// Bit `k` set if axis `k` is within 67.5° of the ray.
+    pub near_dirs: u8,
+}
+
+/// Rays for every pixel of one camera.
+#[derive(Debug, Clone, Default)]
+pub struct RayTable {
+    camera: Option<CameraModel>,
+    rays: Vec<PixelRay>,
+}
+
+/// The six view-direction axes in the paper's order: +x, −x, +y, −y, +z, −z.
+pub const VIEW_AXES: [[f32; 3]; 6] =
+    [[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0]];
+
+/// The view-direction axis closest to a unit direction (first wins on ties) and the
+/// mask of axes within 67.5° of it.
+pub fn view_dirs_of(dir: [f32; 3]) -> (u8, u8) {
+    let mut best = 0u8;
+    let mut best_dot = f32::NEG_INFINITY;
+    let mut mask = 0u8;
+    for (k, axis) in VIEW_AXES.iter().enumerate() {
+        let dot = axis[0] * dir[0] + axis[1] * dir[1] + axis[2] * dir[2];
+        if dot > best_dot {
+            best_dot = dot;
+            best = k as u8;
+        }
+        if dot > VIEW_DIR_SMOOTH_COS {
+            mask |= 1 << k;
+        }
+    }
+    (best, mask)
+}
+
+impl RayTable {
+    /// An empty table with room for `pixels` rays (allocated once).
+    pub fn with_capacity(pixels: usize) -> Self {
+        RayTable { camera: None, rays: Vec::with_capacity(pixels) }
+    }
+
+    /// Makes the table match `camera`, recomputing only if the camera changed.
+    /// Allocates only if the image is larger than any seen before.
+    pub fn ensure(&mut self, camera: &CameraModel) -> Result<(), CameraError> {
+        if self.camera.as_ref() == Some(camera) {
+            return Ok(());
+        }
+        camera.validate()?;
+        self.camera = None;
+        self.rays.clear();
+        for v in 0..camera.height {
+            for u in 0..camera.width {
+                let (x, y) = camera
+                    .unproject_normalized(u as f64, v as f64)
+                    .ok_or(CameraError::NonInvertibleDistortion { u, v })?;
+                let norm = (x * x + y * y + 1.0).sqrt();
+                let dir = [(x / norm) as f32, (y / norm) as f32, (1.0 / norm) as f32];
+                let (best_dir, near_dirs) = view_dirs_of(dir);
+                self.rays.push(PixelRay {
+                    x: x as f32,
+                    y: y as f32,
+                    range2_factor: (x * x + y * y + 1.0) as f32,
+                    best_dir,
+                    near_dirs,
+                });
+            }
+        }
+        self.camera = Some(*camera);
+        Ok(())
+    }
+
+    /// The rays, row-major.
+    pub fn rays(&self) -> &[PixelRay] {
+        &self.rays
+    }
+}

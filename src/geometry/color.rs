@@ -1,0 +1,58 @@
+//! The Lαβ colour space of the paper (§3.1): luminance `L` and two chrominances.
+//!
+//! With `r, g, b ∈ [0, 1]`: `L = (max + min)/2`, `α = r − (g + b)/2`,
+//! `β = (√3/2)(g − b)`. Luminance and chrominance are thereby separated, so the
+//! registration can gate luminance and chrominance with different thresholds.
+
+/// `√3 / 2`.
+const HALF_SQRT3: f32 = 0.866_025_4;
+
+/// Converts an 8-bit RGB triple to `[L, α, β]`.
+#[inline]
+pub fn rgb8_to_lab(r: u8, g: u8, b: u8) -> [f32; 3] {
+    const INV255: f32 = 1.0 / 255.0;
+    let (r, g, b) = (r as f32 * INV255, g as f32 * INV255, b as f32 * INV255);
+    let max = r.max(g).max(b);
+    let min = r.min(g).min(b);
+    [0.5 * (max + min), r - 0.5 * (g + b), HALF_SQRT3 * (g - b)]
+}
+
+/// Converts `[L, α, β]` back to 8-bit RGB for display.
+///
+/// The forward map keeps hue and chroma in `(α, β)` and `L = (max + min)/2`, so the
+/// inverse reconstructs the offsets of r, g, b from their mean and then shifts them so
+/// that `(max + min)/2 = L`; values are clamped to `[0, 255]`.
+pub fn lab_to_rgb8(lab: [f32; 3]) -> [u8; 3] {
+    let [l, a, b] = lab;
+    // Offsets from the channel mean m: r − m = 2α/3, g − m = −α/3 + β/√3, b − m = −α/3 − β/√3.
+    let inv_sqrt3 = 1.0 / 3f32.sqrt();
+    let dr = 2.0 * a / 3.0;
+    let dg = -a / 3.0 + b * inv_sqrt3;
+    let db = -a / 3.0 - b * inv_sqrt3;
+    let mid = 0.5 * (dr.max(dg).max(db) + dr.min(dg).min(db));
+    let m = l - mid;
+    let to8 = |v: f32| ((v + m) * 255.0).round().clamp(0.0, 255.0) as u8;
+    [to8(dr), to8(dg), to8(db)]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        #[test]
+        fn round_trip_is_exact_to_one_level(r in 0u8..=255, g in 0u8..=255, b in 0u8..=255) {
+            let back = lab_to_rgb8(rgb8_to_lab(r, g, b));
+            for (x, y) in back.iter().zip([r, g, b]) {
+                prop_assert!((*x as i32 - y as i32).abs() <= 1, "{:?} vs {:?}", back, (r, g, b));
+            }
+        }
+    }
+
+    #[test]
+    fn grey_has_no_chrominance() {
+        let [l, a, b] = rgb8_to_lab(128, 128, 128);
+        assert!((l - 128.0 / 255.0).abs() < 1e-6 && a.abs() < 1e-6 && b.abs() < 1e-6);
+    }
+}

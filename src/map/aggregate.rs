@@ -1,0 +1,260 @@
+//! Efficient RGB-D image aggregation (paper §3.3).
+//!
+//! Neighbouring pixels that fall into the same octree cell at their maximum resolution
+//! are summed in image space first, so the tree receives a few thousand aggregates per
+//! VGA image instead of 307 200 points. In raster order a pixel joins the aggregate of
+//! the pixel above, above-left, above-right or left if that pixel has the same cell;
+//! otherwise it starts a new aggregate.
+//!
+//! The image is cut into fixed bands of rows that aggregate independently (and in
+//! parallel): a cell cut by a band boundary yields two aggregates that merge in the
+//! tree. The bands do not depend on the number of threads, so neither does the map.
+//!
+//! Each aggregate keeps, per view direction, the raw moments of `v = (1, p − r)` with
+//! `p = (x, y, z, L, α, β)` about its first point `r`: 28 sums of `upper(v vᵀ)`, in
+//! `f32`, which is exact enough because `p − r` is at most a cell across.
+
+use super::params::MAX_LEVELS;
+use super::stats::{PACKED6, SurfelStats};
+use crate::frame::{PixelRay, RgbdFrame};
+use crate::geometry::color::rgb8_to_lab;
+use std::sync::atomic::{AtomicU8, Ordering};
+
+use super::border::{FOREGROUND_BORDER, VIRTUAL_BORDER};
+use super::tree::NONE;
+
+/// Rows per aggregation band.
+pub(crate) const BAND_ROWS: usize = 32;
+
+/// Raw moments of `upper(v vᵀ)` for `v = (1, p − r)`: count, 6 sums, 21 products.
+pub(crate) type Moments = [f32; 28];
+
+/// Pixels of one cell, contiguous in the image, at their common maximum resolution.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Aggregate {
+    /// Cell key at `level`.
+    pub key: [i32; 3],
+    /// Resolution level.
+    pub level: u8,
+    /// View directions that received points.
+    pub dir_mask: u8,
+    /// View directions of virtual-border pixels (§3.4).
+    pub excluded_dirs: u8,
+    /// Holds a foreground contour pixel (§3.4).
+    pub border: bool,
+    /// Index of the moments per view direction in the band's pool, `NONE` if unused.
+    pub moments: [u32; 6],
+    /// First point: the origin of the moments.
+    pub reference: [f32; 6],
+    /// Unit ray of the first pixel (sensor → point).
+    pub view_dir: [f32; 3],
+}
+
+impl Aggregate {
+    /// The surfel statistics of view direction `dir`.
+    pub(crate) fn stats(&self, pool: &[Moments], dir: usize) -> SurfelStats {
+        let m = &pool[self.moments[dir] as usize];
+        let reference = self.reference.map(|v| v as f64);
+        let mut sum_rel = [0.0; 6];
+        for (k, s) in sum_rel.iter_mut().enumerate() {
+            *s = m[1 + k] as f64;
+        }
+        let mut raw2 = [0.0; PACKED6];
+        for (k, r) in raw2.iter_mut().enumerate() {
+            *r = m[7 + k] as f64;
+        }
+        SurfelStats::from_moments_about(&reference, m[0] as f64, &sum_rel, &raw2)
+    }
+}
+
+/// `⌊x⌋` for finite `x` within `i32` range, without a libm call (baseline x86-64 has no
+/// rounding instruction, and `f32::floor` then costs a function call per pixel).
+#[inline(always)]
+fn floor_i32(x: f32) -> i32 {
+    let t = x as i32;
+    if (t as f32) > x { t - 1 } else { t }
+}
+
+#[inline(always)]
+fn accumulate(m: &mut Moments, v: &[f32; 6]) {
+    m[0] += 1.0;
+    for i in 0..6 {
+        m[1 + i] += v[i];
+    }
+    let mut k = 7;
+    for i in 0..6 {
+        for j in i..6 {
+            m[k] += v[i] * v[j];
+            k += 1;
+        }
+    }
+}
+
+/// What every band reads.
+pub(crate) struct AggregationInput<'a> {
+    pub frame: &'a RgbdFrame<'a>,
+    pub rays: &'a [PixelRay],
+    pub flags: &'a [AtomicU8],
+    /// Squared range at which the target level steps up (see `MapParams`).
+    pub level_thresholds_r2: [f32; MAX_LEVELS],
+    /// `1 / resolution` per level.
+    pub inv_resolution: [f32; MAX_LEVELS],
+    pub num_levels: usize,
+    pub smooth_view_dirs: bool,
+}
+
+/// Packs level and key into one comparable word (`u64::MAX` = no cell).
+#[inline]
+fn pack(level: usize, key: [i32; 3]) -> u64 {
+    ((level as u64) << 60)
+        | (((key[0] as u64) & 0xF_FFFF) << 40)
+        | (((key[1] as u64) & 0xF_FFFF) << 20)
+        | ((key[2] as u64) & 0xF_FFFF)
+}
+
+const NO_CELL: u64 = u64::MAX;
+
+/// One band of rows and its aggregates.
+#[derive(Debug, Clone)]
+pub(crate) struct Band {
+    pub rows: std::ops::Range<usize>,
+    pub aggregates: Vec<Aggregate>,
+    pub moments: Vec<Moments>,
+    /// Points that found no room (capacity exhausted).
+    pub dropped_points: u32,
+    prev: Vec<(u64, u32)>,
+    cur: Vec<(u64, u32)>,
+    aggregate_capacity: usize,
+    moments_capacity: usize,
+}
+
+impl Band {
+    pub(crate) fn new(rows: std::ops::Range<usize>, width: usize) -> Self {
+        let pixels = rows.len() * width;
+        // Generous: real images average tens of pixels per aggregate.
+        let aggregate_capacity = (pixels / 2).max(64);
+        let moments_capacity = aggregate_capacity * 2;
+        Band {
+            rows,
+            aggregates: Vec::with_capacity(aggregate_capacity),
+            moments: Vec::with_capacity(moments_capacity),
+            dropped_points: 0,
+            prev: vec![(NO_CELL, NONE); width],
+            cur: vec![(NO_CELL, NONE); width],
+            aggregate_capacity,
+            moments_capacity,
+        }
+    }
+
+    /// Points the band at `rows` of an image `width` pixels wide (within the sizes it
+    /// was created for: no allocation).
+    pub(crate) fn configure(&mut self, rows: std::ops::Range<usize>, width: usize) {
+        self.rows = rows;
+        self.prev.resize(width, (NO_CELL, NONE));
+        self.cur.resize(width, (NO_CELL, NONE));
+    }
+
+    /// Aggregates the band's rows.
+    pub(crate) fn aggregate(&mut self, input: &AggregationInput) {
+        self.aggregates.clear();
+        self.moments.clear();
+        self.dropped_points = 0;
+        let frame = input.frame;
+        let width = frame.width();
+        let scale = frame.camera.depth_scale_m as f32;
+        self.prev.iter_mut().for_each(|c| *c = (NO_CELL, NONE));
+        for v in self.rows.clone() {
+            let first_row = v == self.rows.start;
+            for u in 0..width {
+                let idx = v * width + u;
+                let cell = self.pixel(input, idx, u, first_row, scale);
+                self.cur[u] = cell;
+            }
+            std::mem::swap(&mut self.prev, &mut self.cur);
+        }
+    }
+
+    #[inline(always)]
+    fn pixel(&mut self, input: &AggregationInput, idx: usize, u: usize, first_row: bool, scale: f32) -> (u64, u32) {
+        let d = input.frame.depth[idx];
+        if d == 0 {
+            return (NO_CELL, NONE);
+        }
+        let ray = &input.rays[idx];
+        let z = d as f32 * scale;
+        let r2 = z * z * ray.range2_factor;
+        let mut level = 0;
+        while level < input.num_levels && r2 >= input.level_thresholds_r2[level] {
+            level += 1;
+        }
+        if level >= input.num_levels {
+            return (NO_CELL, NONE);
+        }
+        let (x, y) = (ray.x * z, ray.y * z);
+        let inv = input.inv_resolution[level];
+        let key = [floor_i32(x * inv), floor_i32(y * inv), floor_i32(z * inv)];
+        let packed = pack(level, key);
+        let width = self.cur.len();
+        let joined = if !first_row && self.prev[u].0 == packed {
+            self.prev[u].1
+        } else if !first_row && u > 0 && self.prev[u - 1].0 == packed {
+            self.prev[u - 1].1
+        } else if !first_row && u + 1 < width && self.prev[u + 1].0 == packed {
+            self.prev[u + 1].1
+        } else if u > 0 && self.cur[u - 1].0 == packed {
+            self.cur[u - 1].1
+        } else {
+            NONE
+        };
+        let rgb = &input.frame.rgb[3 * idx..3 * idx + 3];
+        let [l, a, b] = rgb8_to_lab(rgb[0], rgb[1], rgb[2]);
+        let point = [x, y, z, l, a, b];
+        let agg = if joined != NONE {
+            joined
+        } else {
+            if self.aggregates.len() >= self.aggregate_capacity {
+                self.dropped_points += 1;
+                return (NO_CELL, NONE);
+            }
+            let n = (x * x + y * y + z * z).sqrt();
+            self.aggregates.push(Aggregate {
+                key,
+                level: level as u8,
+                dir_mask: 0,
+                excluded_dirs: 0,
+                border: false,
+                moments: [NONE; 6],
+                reference: point,
+                view_dir: [x / n, y / n, z / n],
+            });
+            self.aggregates.len() as u32 - 1
+        };
+        let flags = input.flags[idx].load(Ordering::Relaxed);
+        let dirs = if input.smooth_view_dirs { ray.near_dirs } else { 1 << ray.best_dir };
+        let aggregate = &mut self.aggregates[agg as usize];
+        if flags & VIRTUAL_BORDER != 0 {
+            aggregate.excluded_dirs |= ray.near_dirs;
+        }
+        aggregate.border |= flags & FOREGROUND_BORDER != 0;
+        let r = aggregate.reference;
+        let rel = [x - r[0], y - r[1], z - r[2], l - r[3], a - r[4], b - r[5]];
+        for dir in 0..6 {
+            if dirs & (1 << dir) == 0 {
+                continue;
+            }
+            let mut slot = aggregate.moments[dir];
+            if slot == NONE {
+                if self.moments.len() >= self.moments_capacity {
+                    self.dropped_points += 1;
+                    continue;
+                }
+                self.moments.push([0.0; 28]);
+                slot = self.moments.len() as u32 - 1;
+                aggregate.moments[dir] = slot;
+                aggregate.dir_mask |= 1 << dir;
+            }
+            accumulate(&mut self.moments[slot as usize], &rel);
+        }
+        (packed, agg)
+    }
+}

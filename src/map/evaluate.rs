@@ -1,0 +1,145 @@
+//! From sufficient statistics to evaluated surfels: mean, covariance, degeneracy and
+//! normals (§3.1). Every pass is per surfel and writes only its own entry, so the
+//! parallel passes give the same result for any number of threads.
+
+use super::params::MapParams;
+use super::stats::{SurfelStats, packed_index};
+use super::tree::{NONE, Node};
+use super::{Surfel, SurfelMap};
+use crate::geometry::eigen3::smallest_eigen;
+use nalgebra::{Matrix3, Vector3};
+use rayon::prelude::*;
+
+/// Surfels per parallel work item (fixed, so that work splits do not depend on threads).
+pub(crate) const CHUNK: usize = 256;
+
+/// Spatial raw moments `(n, Σp, Σppᵀ)` of one surfel, for summing over neighbourhoods.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct RawMoments {
+    n: f64,
+    sum: Vector3<f64>,
+    /// `Σ p pᵀ`, packed xx, xy, xz, yy, yz, zz.
+    raw2: [f64; 6],
+}
+
+impl RawMoments {
+    fn of(stats: &SurfelStats) -> Self {
+        if stats.count <= 0.0 {
+            return RawMoments::default();
+        }
+        let s = Vector3::new(stats.sum[0], stats.sum[1], stats.sum[2]);
+        let n = stats.count;
+        let mut raw2 = [0.0; 6];
+        let mut k = 0;
+        for i in 0..3 {
+            for j in i..3 {
+                raw2[k] = stats.scatter[packed_index(i, j)] + s[i] * s[j] / n;
+                k += 1;
+            }
+        }
+        RawMoments { n, sum: s, raw2 }
+    }
+
+    fn add(&mut self, o: &RawMoments) {
+        self.n += o.n;
+        self.sum += o.sum;
+        for k in 0..6 {
+            self.raw2[k] += o.raw2[k];
+        }
+    }
+
+    fn covariance(&self) -> Matrix3<f64> {
+        let n = self.n;
+        let m = self.sum / n;
+        let r = &self.raw2;
+        let c = |v: f64, i: usize, j: usize| (v - n * m[i] * m[j]) / (n - 1.0);
+        let (xx, xy, xz) = (c(r[0], 0, 0), c(r[1], 0, 1), c(r[2], 0, 2));
+        let (yy, yz, zz) = (c(r[3], 1, 1), c(r[4], 1, 2), c(r[5], 2, 2));
+        Matrix3::new(xx, xy, xz, xy, yy, yz, xz, yz, zz)
+    }
+}
+
+/// Is a position covariance usable? Finite, positive, and of rank ≥ 2 (a line or a
+/// point has no normal). A planar covariance (smallest eigenvalue ≈ 0) is the normal
+/// case for a surface and is accepted.
+fn covariance_is_proper(cov: &Matrix3<f64>) -> bool {
+    if !cov.iter().all(|v| v.is_finite()) {
+        return false;
+    }
+    let e = crate::geometry::eigen3::symmetric_eigenvalues(cov);
+    e[2] > 1e-14 && e[1] > 1e-6 * e[2] && e[0] > -1e-9 * e[2]
+}
+
+/// Mean, covariance, colour, count and validity of every surfel, plus the raw moments
+/// used for normal smoothing.
+pub(crate) fn evaluate_statistics(map: &mut SurfelMap, raw: &mut [RawMoments]) {
+    let params = map.params;
+    let nodes = &map.tree.nodes;
+    let stats = &map.stats;
+    map.surfels.par_chunks_mut(CHUNK).zip(raw.par_chunks_mut(CHUNK)).enumerate().for_each(|(c, (surfels, raw))| {
+        for (k, (s, r)) in surfels.iter_mut().zip(raw.iter_mut()).enumerate() {
+            let st = &stats[c * CHUNK + k];
+            *r = RawMoments::of(st);
+            evaluate_one(&params, &nodes[s.node as usize], st, s);
+        }
+    });
+}
+
+fn evaluate_one(params: &MapParams, node: &Node, st: &SurfelStats, s: &mut Surfel) {
+    s.count = st.count as f32;
+    s.excluded = node.excluded_dirs & (1 << s.dir) != 0;
+    s.valid = false;
+    s.usable = false;
+    if st.count < params.min_points {
+        return;
+    }
+    let mean = st.mean();
+    s.mean = Vector3::new(mean[0] as f32, mean[1] as f32, mean[2] as f32);
+    s.color = Vector3::new(mean[3] as f32, mean[4] as f32, mean[5] as f32);
+    let cov = st.position_covariance();
+    s.cov = cov.cast::<f32>();
+    s.valid = covariance_is_proper(&cov);
+    s.usable = s.valid && !s.excluded;
+}
+
+/// Normals from the smallest eigenvector of the covariance, summed over the surfels of
+/// the same view direction in the 3×3×3 neighbourhood when `smooth_normals` is set, and
+/// turned towards the sensor. A surfel without a unique normal becomes invalid.
+pub(crate) fn estimate_normals(map: &mut SurfelMap, raw: &[RawMoments]) {
+    let smooth = map.params.smooth_normals;
+    let nodes = &map.tree.nodes;
+    let neighbors = &map.tree.neighbors;
+    let view_dirs = &map.view_dirs;
+    map.surfels.par_chunks_mut(CHUNK).enumerate().for_each(|(c, surfels)| {
+        for (k, s) in surfels.iter_mut().enumerate() {
+            if !s.valid {
+                continue;
+            }
+            let idx = c * CHUNK + k;
+            let cov: Matrix3<f64> = if smooth {
+                let mut sum = RawMoments::default();
+                for &nb in neighbors[s.node as usize].iter().filter(|&&n| n != NONE) {
+                    let ns = nodes[nb as usize].surfels[s.dir as usize];
+                    if ns != NONE {
+                        sum.add(&raw[ns as usize]);
+                    }
+                }
+                sum.covariance()
+            } else {
+                s.cov.cast::<f64>()
+            };
+            match smallest_eigen(&cov).vector {
+                Some(n) => {
+                    let v = view_dirs[idx];
+                    let n = n.cast::<f32>();
+                    let facing = n.x * v[0] + n.y * v[1] + n.z * v[2];
+                    s.normal = if facing > 0.0 { -n } else { n };
+                }
+                None => {
+                    s.valid = false;
+                    s.usable = false;
+                }
+            }
+        }
+    });
+}

@@ -1,0 +1,201 @@
+//! Multi-resolution surfel maps (paper §3).
+//!
+//! An octree over the map frame holds, in every node at every resolution, up to six
+//! surfels — one per view direction (±x, ±y, ±z) — each summarising the 6-D position +
+//! Lαβ colour statistics of the points it saw (§3.1), a normal, and a shape–texture
+//! descriptor (§3.2). [`MapBuilder`] turns an RGB-D image into a map (§3.3, §3.4).
+//!
+//! Storage is a set of fixed-capacity arenas allocated once ([`SurfelMap::new`]) and
+//! reused for every frame. Nodes and surfels are laid out level by level, coarsest
+//! first. The map owns no notion of time, poses over time, files or threads.
+
+mod aggregate;
+mod border;
+mod build;
+mod descriptor;
+mod evaluate;
+pub mod params;
+pub mod stats;
+pub mod tree;
+
+pub use build::{BuildReport, MapBuilder, MapError};
+pub use descriptor::{DESCRIPTOR_LEN, Descriptor, descriptor_distance2};
+pub use params::{MAX_LEVELS, MapCapacity, MapParams, MapParamsError};
+pub use stats::SurfelStats;
+pub use tree::{NONE, Node, NodeArena, SELF_NEIGHBOR, neighbor_index};
+
+use nalgebra::{Matrix3, Vector3};
+
+/// An evaluated surfel: what registration reads (compact, single precision; the
+/// double-precision statistics stay in [`SurfelMap::stats`]).
+///
+/// The layout is fixed so that what association tests — mean, colour, flags — shares
+/// the first cache line.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[repr(C)]
+pub struct Surfel {
+    /// Mean position (m, map frame).
+    pub mean: Vector3<f32>,
+    /// Mean colour `[L, α, β]`.
+    pub color: Vector3<f32>,
+    /// View-direction index (0 +x, 1 −x, 2 +y, 3 −y, 4 +z, 5 −z).
+    pub dir: u8,
+    /// At least `min_points` points, a proper covariance and a normal.
+    pub valid: bool,
+    /// Touched a virtual or image border (§3.4): kept out of registration.
+    pub excluded: bool,
+    /// `valid && !excluded`: may take part in registration.
+    pub usable: bool,
+    /// Number of points.
+    pub count: f32,
+    /// Node that holds the surfel.
+    pub node: u32,
+    /// Unbiased covariance of the position (m²).
+    pub cov: Matrix3<f32>,
+    /// Unit normal, pointing towards the sensor that first saw the surfel.
+    pub normal: Vector3<f32>,
+}
+
+impl Surfel {
+    const EMPTY: Surfel = Surfel {
+        mean: Vector3::new(0.0, 0.0, 0.0),
+        color: Vector3::new(0.0, 0.0, 0.0),
+        dir: 0,
+        valid: false,
+        excluded: false,
+        usable: false,
+        count: 0.0,
+        node: NONE,
+        cov: Matrix3::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+        normal: Vector3::new(0.0, 0.0, 0.0),
+    };
+
+    /// Valid and not excluded: may take part in registration.
+    #[inline]
+    pub fn usable(&self) -> bool {
+        self.usable
+    }
+}
+
+/// A multi-resolution surfel map in fixed-capacity storage.
+#[derive(Debug, Clone)]
+pub struct SurfelMap {
+    pub(crate) params: MapParams,
+    pub(crate) tree: NodeArena,
+    pub(crate) stats: Vec<SurfelStats>,
+    pub(crate) surfels: Vec<Surfel>,
+    /// Unit direction from the sensor to the first point of each surfel.
+    pub(crate) view_dirs: Vec<[f32; 3]>,
+    pub(crate) descriptors: Vec<Descriptor>,
+    surfel_capacity: usize,
+}
+
+impl SurfelMap {
+    /// An empty map with arenas of the given capacity (the only allocation).
+    pub fn new(params: MapParams, capacity: MapCapacity) -> Result<Self, MapParamsError> {
+        params.validate()?;
+        Ok(SurfelMap {
+            params,
+            tree: NodeArena::with_capacity(capacity.nodes, params.num_levels),
+            stats: Vec::with_capacity(capacity.surfels),
+            surfels: Vec::with_capacity(capacity.surfels),
+            view_dirs: Vec::with_capacity(capacity.surfels),
+            descriptors: Vec::with_capacity(capacity.surfels),
+            surfel_capacity: capacity.surfels,
+        })
+    }
+
+    /// Removes every node and surfel, keeping the storage.
+    pub fn clear(&mut self) {
+        self.tree.clear(self.params.num_levels);
+        self.stats.clear();
+        self.surfels.clear();
+        self.view_dirs.clear();
+        self.descriptors.clear();
+    }
+
+    /// The parameters the map was built with.
+    pub fn params(&self) -> &MapParams {
+        &self.params
+    }
+
+    /// Number of resolution levels.
+    pub fn num_levels(&self) -> usize {
+        self.params.num_levels
+    }
+
+    /// Cell edge (m) at `level`.
+    pub fn resolution(&self, level: usize) -> f64 {
+        self.params.resolution(level)
+    }
+
+    /// All nodes.
+    pub fn nodes(&self) -> &[Node] {
+        &self.tree.nodes
+    }
+
+    /// The node range of `level`.
+    pub fn level_nodes(&self, level: usize) -> std::ops::Range<usize> {
+        self.tree.level_start[level] as usize..self.tree.level_end[level] as usize
+    }
+
+    /// The same-level 27-neighbourhood of a node (index [`SELF_NEIGHBOR`] is the node).
+    pub fn neighbors(&self, node: u32) -> &[u32; 27] {
+        &self.tree.neighbors[node as usize]
+    }
+
+    /// All evaluated surfels.
+    pub fn surfels(&self) -> &[Surfel] {
+        &self.surfels
+    }
+
+    /// The shape–texture descriptors, parallel to [`Self::surfels`].
+    pub fn descriptors(&self) -> &[Descriptor] {
+        &self.descriptors
+    }
+
+    /// The raw statistics, parallel to [`Self::surfels`].
+    pub fn stats(&self) -> &[SurfelStats] {
+        &self.stats
+    }
+
+    /// Centre of a node's cell (m).
+    pub fn node_center(&self, node: &Node) -> Vector3<f64> {
+        let res = self.resolution(node.level as usize);
+        Vector3::new(
+            (node.key[0] as f64 + 0.5) * res,
+            (node.key[1] as f64 + 0.5) * res,
+            (node.key[2] as f64 + 0.5) * res,
+        )
+    }
+
+    /// The integer key of the cell containing `p` at `level`.
+    pub fn key_of(&self, p: &Vector3<f64>, level: usize) -> [i32; 3] {
+        let inv = 1.0 / self.resolution(level);
+        [(p.x * inv).floor() as i32, (p.y * inv).floor() as i32, (p.z * inv).floor() as i32]
+    }
+
+    /// The node of `key` at `level`, if any.
+    pub fn find(&self, level: usize, key: [i32; 3]) -> Option<u32> {
+        self.tree.find(level, key)
+    }
+
+    /// Capacity in surfels.
+    pub fn surfel_capacity(&self) -> usize {
+        self.surfel_capacity
+    }
+
+    /// Capacity in nodes.
+    pub fn node_capacity(&self) -> usize {
+        self.tree.capacity()
+    }
+
+    /// Number of usable surfels (valid and not excluded) per level, finest first.
+    pub fn usable_surfels_per_level(&self) -> [usize; MAX_LEVELS] {
+        let mut out = [0; MAX_LEVELS];
+        for s in self.surfels.iter().filter(|s| s.usable()) {
+            out[self.tree.nodes[s.node as usize].level as usize] += 1;
+        }
+        out
+    }
+}

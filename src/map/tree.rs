@@ -1,0 +1,387 @@
+//! The multi-resolution octree: a fixed-capacity node arena laid out level by level.
+//!
+//! Nodes of one level are contiguous and levels are stored coarsest first, so every
+//! per-level pass reads and writes one slice. Cells are axis-aligned in the map frame:
+//! the cell of point `p` at level `l` has integer key `⌊p / res_l⌋` and the parent key is
+//! `key >> 1` (floor division, also for negative keys).
+
+use super::params::MAX_LEVELS;
+
+/// Marks an absent child, neighbour or surfel.
+pub const NONE: u32 = u32::MAX;
+
+/// Index of the node itself in a 27-neighbourhood: `9(dx+1) + 3(dy+1) + (dz+1)`.
+pub const SELF_NEIGHBOR: usize = 13;
+
+/// Index of offset `(dx, dy, dz) ∈ {−1, 0, 1}³` in a 27-neighbourhood.
+#[inline]
+pub const fn neighbor_index(dx: i32, dy: i32, dz: i32) -> usize {
+    (9 * (dx + 1) + 3 * (dy + 1) + (dz + 1)) as usize
+}
+
+/// Octant of a key within its parent: `4·(x & 1) + 2·(y & 1) + (z & 1)`.
+#[inline]
+pub const fn octant(key: [i32; 3]) -> usize {
+    (((key[0] & 1) << 2) | ((key[1] & 1) << 1) | (key[2] & 1)) as usize
+}
+
+/// Interleaves the bits of a cell key (biased to be non-negative, 21 bits per axis) into
+/// a Morton code: sorting by it keeps cells that are near in space near in memory, at
+/// every level at once (the code of a cell prefixes the codes of its children).
+pub(crate) fn morton_code(key: [i32; 3]) -> u64 {
+    fn spread(v: i32) -> u64 {
+        let mut x = ((v as i64 + (1 << 20)) as u64) & 0x1F_FFFF;
+        x = (x | (x << 32)) & 0x001F_0000_0000_FFFF;
+        x = (x | (x << 16)) & 0x001F_0000_FF00_00FF;
+        x = (x | (x << 8)) & 0x100F_00F0_0F00_F00F;
+        x = (x | (x << 4)) & 0x10C3_0C30_C30C_30C3;
+        x = (x | (x << 2)) & 0x1249_2492_4924_9249;
+        x
+    }
+    (spread(key[0]) << 2) | (spread(key[1]) << 1) | spread(key[2])
+}
+
+/// One octree cell. The layout is fixed so that what association reads — key, flags,
+/// surfel slots — shares the first cache line.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[repr(C)]
+pub struct Node {
+    /// Integer cell key at this node's level.
+    pub key: [i32; 3],
+    /// Resolution level (0 = finest).
+    pub level: u8,
+    /// A foreground contour pixel fell into this cell (§3.4).
+    pub border: bool,
+    /// View directions whose surfels saw a virtual or image border (§3.4): bit `k` set
+    /// means the surfel of view direction `k` is excluded from registration.
+    pub excluded_dirs: u8,
+    /// View directions that hold a surfel.
+    pub dir_mask: u8,
+    /// Surfel index per view direction, `NONE` where absent.
+    pub surfels: [u32; 6],
+    /// Parent node, `NONE` at the coarsest level.
+    pub parent: u32,
+    /// Children by octant, `NONE` where absent.
+    pub children: [u32; 8],
+}
+
+impl Node {
+    fn new(key: [i32; 3], level: u8, parent: u32) -> Self {
+        Node {
+            key,
+            level,
+            border: false,
+            excluded_dirs: 0,
+            dir_mask: 0,
+            parent,
+            children: [NONE; 8],
+            surfels: [NONE; 6],
+        }
+    }
+}
+
+/// Open-addressing hash from cell key to node, for the coarsest level.
+/// Cleared in O(1) by bumping a generation counter.
+#[derive(Debug, Clone)]
+pub(crate) struct CellHash {
+    slots: Vec<HashSlot>,
+    mask: usize,
+    generation: u32,
+    /// Entries of the current generation; kept at most half the slots so probes end.
+    len: usize,
+}
+
+#[derive(Debug, Clone, Copy, Default)]
+struct HashSlot {
+    key: [i32; 3],
+    node: u32,
+    generation: u32,
+}
+
+#[inline]
+fn hash_key(key: [i32; 3]) -> u64 {
+    let h = (key[0] as u32 as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+        ^ (key[1] as u32 as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F)
+        ^ (key[2] as u32 as u64).wrapping_mul(0x1656_67B1_9E37_79F9);
+    h ^ (h >> 29)
+}
+
+impl CellHash {
+    pub(crate) fn with_capacity(entries: usize) -> Self {
+        let size = (entries * 2).next_power_of_two().max(64);
+        CellHash { slots: vec![HashSlot::default(); size], mask: size - 1, generation: 1, len: 0 }
+    }
+
+    pub(crate) fn clear(&mut self) {
+        self.generation = self.generation.wrapping_add(1);
+        self.len = 0;
+        if self.generation == 0 {
+            self.slots.iter_mut().for_each(|s| s.generation = 0);
+            self.generation = 1;
+        }
+    }
+
+    pub(crate) fn get(&self, key: [i32; 3]) -> Option<u32> {
+        let mut i = hash_key(key) as usize & self.mask;
+        loop {
+            let s = &self.slots[i];
+            if s.generation != self.generation {
+                return None;
+            }
+            if s.key == key {
+                return Some(s.node);
+            }
+            i = (i + 1) & self.mask;
+        }
+    }
+
+    /// Returns the existing node of `key`, or inserts `make()` if there is room.
+    pub(crate) fn get_or_insert(&mut self, key: [i32; 3], make: impl FnOnce() -> Option<u32>) -> Option<u32> {
+        let mut i = hash_key(key) as usize & self.mask;
+        loop {
+            let slot = self.slots[i];
+            if slot.generation != self.generation {
+                if 2 * (self.len + 1) > self.slots.len() {
+                    return None;
+                }
+                let node = make()?;
+                self.slots[i] = HashSlot { key, node, generation: self.generation };
+                self.len += 1;
+                return Some(node);
+            }
+            if slot.key == key {
+                return Some(slot.node);
+            }
+            i = (i + 1) & self.mask;
+        }
+    }
+}
+
+/// The node arena with its per-level ranges.
+#[derive(Debug, Clone)]
+pub struct NodeArena {
+    pub(crate) nodes: Vec<Node>,
+    pub(crate) neighbors: Vec<[u32; 27]>,
+    /// `level_start[l]..level_end[l]` are the nodes of level `l`.
+    pub(crate) level_start: [u32; MAX_LEVELS],
+    pub(crate) level_end: [u32; MAX_LEVELS],
+    pub(crate) num_levels: usize,
+    pub(crate) top: CellHash,
+    capacity: usize,
+}
+
+impl NodeArena {
+    pub(crate) fn with_capacity(nodes: usize, num_levels: usize) -> Self {
+        NodeArena {
+            nodes: Vec::with_capacity(nodes),
+            neighbors: Vec::with_capacity(nodes),
+            level_start: [0; MAX_LEVELS],
+            level_end: [0; MAX_LEVELS],
+            num_levels,
+            top: CellHash::with_capacity(nodes.min(1 << 16)),
+            capacity: nodes,
+        }
+    }
+
+    pub(crate) fn clear(&mut self, num_levels: usize) {
+        self.nodes.clear();
+        self.neighbors.clear();
+        self.level_start = [0; MAX_LEVELS];
+        self.level_end = [0; MAX_LEVELS];
+        self.num_levels = num_levels;
+        self.top.clear();
+    }
+
+    /// Capacity in nodes.
+    pub fn capacity(&self) -> usize {
+        self.capacity
+    }
+
+    /// The coarsest level.
+    pub fn top_level(&self) -> usize {
+        self.num_levels - 1
+    }
+
+    /// Starts the node range of `level`; levels must be opened coarsest first.
+    pub(crate) fn open_level(&mut self, level: usize) {
+        let n = self.nodes.len() as u32;
+        self.level_start[level] = n;
+        self.level_end[level] = n;
+    }
+
+    /// Ends the node range of the level opened last.
+    pub(crate) fn close_level(&mut self, level: usize) {
+        self.level_end[level] = self.nodes.len() as u32;
+    }
+
+    fn push(&mut self, node: Node) -> Option<u32> {
+        if self.nodes.len() >= self.capacity {
+            return None;
+        }
+        self.nodes.push(node);
+        Some(self.nodes.len() as u32 - 1)
+    }
+
+    /// Finds or creates the coarsest-level node of `key` (`None` when full).
+    pub(crate) fn top_node(&mut self, key: [i32; 3]) -> Option<u32> {
+        let level = self.top_level() as u8;
+        let len = self.nodes.len();
+        let capacity = self.capacity;
+        let idx = self.top.get_or_insert(key, || if len < capacity { Some(len as u32) } else { None })?;
+        if idx as usize == self.nodes.len() {
+            self.push(Node::new(key, level, NONE))?;
+        }
+        Some(idx)
+    }
+
+    /// Finds or creates the child of `parent` that contains `child_key` (`None` when full).
+    pub(crate) fn child_node(&mut self, parent: u32, child_key: [i32; 3]) -> Option<u32> {
+        let oct = octant(child_key);
+        let existing = self.nodes[parent as usize].children[oct];
+        if existing != NONE {
+            return Some(existing);
+        }
+        let level = self.nodes[parent as usize].level - 1;
+        let idx = self.push(Node::new(child_key, level, parent))?;
+        self.nodes[parent as usize].children[oct] = idx;
+        Some(idx)
+    }
+
+    /// The node of `key` at `level`, if it exists.
+    pub fn find(&self, level: usize, key: [i32; 3]) -> Option<u32> {
+        if level >= self.num_levels {
+            return None;
+        }
+        let top = self.top_level();
+        let shift = (top - level) as u32;
+        let mut node = self.top.get([key[0] >> shift, key[1] >> shift, key[2] >> shift])?;
+        for l in (level..top).rev() {
+            let s = (l - level) as u32;
+            let k = [key[0] >> s, key[1] >> s, key[2] >> s];
+            node = self.nodes[node as usize].children[octant(k)];
+            if node == NONE {
+                return None;
+            }
+        }
+        Some(node)
+    }
+
+    /// Fills the 27-neighbourhood of every node (same level only), coarsest level first:
+    /// the coarsest level by hash look-ups, every finer level from its parent's
+    /// neighbours' children.
+    pub(crate) fn establish_neighbors(&mut self) {
+        self.neighbors.clear();
+        self.neighbors.resize(self.nodes.len(), [NONE; 27]);
+        let top = self.top_level();
+        for i in self.level_start[top]..self.level_end[top] {
+            let key = self.nodes[i as usize].key;
+            let mut nb = [NONE; 27];
+            for dx in -1..=1 {
+                for dy in -1..=1 {
+                    for dz in -1..=1 {
+                        let k = [key[0] + dx, key[1] + dy, key[2] + dz];
+                        nb[neighbor_index(dx, dy, dz)] = self.top.get(k).unwrap_or(NONE);
+                    }
+                }
+            }
+            self.neighbors[i as usize] = nb;
+        }
+        for level in (0..top).rev() {
+            let (start, end) = (self.level_start[level] as usize, self.level_end[level] as usize);
+            let (coarser, this) = self.neighbors.split_at_mut(start);
+            let nodes = &self.nodes;
+            for (i, nb) in (start..end).zip(this[..end - start].iter_mut()) {
+                *nb = neighbors_from_parent(nodes, coarser, i);
+            }
+        }
+    }
+}
+
+/// The 27-neighbourhood of node `i` from its parent's neighbourhood.
+fn neighbors_from_parent(nodes: &[Node], coarser_neighbors: &[[u32; 27]], i: usize) -> [u32; 27] {
+    let node = &nodes[i];
+    let parent_nb = &coarser_neighbors[node.parent as usize];
+    let mut nb = [NONE; 27];
+    for dx in -1..=1i32 {
+        for dy in -1..=1i32 {
+            for dz in -1..=1i32 {
+                let k = [node.key[0] + dx, node.key[1] + dy, node.key[2] + dz];
+                // Offset of the neighbour's parent from our parent, each in {−1, 0, 1}.
+                let p = [
+                    (k[0] >> 1) - (node.key[0] >> 1),
+                    (k[1] >> 1) - (node.key[1] >> 1),
+                    (k[2] >> 1) - (node.key[2] >> 1),
+                ];
+                let parent = parent_nb[neighbor_index(p[0], p[1], p[2])];
+                if parent != NONE {
+                    nb[neighbor_index(dx, dy, dz)] = nodes[parent as usize].children[octant(k)];
+                }
+            }
+        }
+    }
+    nb
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn morton_code_orders_children_after_their_parent_prefix() {
+        assert!(morton_code([0, 0, 0]) < morton_code([0, 0, 1]));
+        assert!(morton_code([0, 0, 1]) < morton_code([0, 1, 0]));
+        assert!(morton_code([0, 1, 1]) < morton_code([1, 0, 0]));
+        assert!(morton_code([-1, -1, -1]) < morton_code([0, 0, 0]));
+        // All children of cell (3,5,7) at the next level lie between its corner codes.
+        let parent_lo = morton_code([6, 10, 14]);
+        let parent_hi = morton_code([7, 11, 15]);
+        for c in 0..8i32 {
+            let k = [6 + (c >> 2), 10 + ((c >> 1) & 1), 14 + (c & 1)];
+            let m = morton_code(k);
+            assert!(m >= parent_lo && m <= parent_hi);
+        }
+    }
+
+    #[test]
+    fn neighbours_match_brute_force() {
+        // A random cloud of fine keys; build paths, then compare the neighbour table
+        // with look-ups by key.
+        let mut arena = NodeArena::with_capacity(20_000, 4);
+        let mut state = 12345u64;
+        let mut keys = Vec::new();
+        for _ in 0..600 {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            let k =
+                [((state >> 33) % 40) as i32 - 20, ((state >> 41) % 40) as i32 - 20, ((state >> 49) % 12) as i32 - 6];
+            keys.push(k);
+        }
+        let top = 3usize;
+        let mut current: Vec<u32> = vec![NONE; keys.len()];
+        for level in (0..=top).rev() {
+            arena.open_level(level);
+            for (j, k) in keys.iter().enumerate() {
+                let s = level as u32;
+                let key = [k[0] >> s, k[1] >> s, k[2] >> s];
+                current[j] = if level == top {
+                    arena.top_node(key).unwrap()
+                } else {
+                    arena.child_node(current[j], key).unwrap()
+                };
+            }
+            arena.close_level(level);
+        }
+        arena.establish_neighbors();
+        for (i, node) in arena.nodes.iter().enumerate() {
+            for dx in -1..=1 {
+                for dy in -1..=1 {
+                    for dz in -1..=1 {
+                        let k = [node.key[0] + dx, node.key[1] + dy, node.key[2] + dz];
+                        let expect = arena.find(node.level as usize, k).unwrap_or(NONE);
+                        assert_eq!(arena.neighbors[i][neighbor_index(dx, dy, dz)], expect);
+                    }
+                }
+            }
+            assert_eq!(arena.neighbors[i][SELF_NEIGHBOR], i as u32);
+        }
+    }
+}

@@ -1,0 +1,431 @@
+//! Multi-resolution surfel association (paper §4.1).
+//!
+//! Scene nodes are associated level by level from the finest to the coarsest; a node
+//! whose child holds an association is skipped (each region is matched at the finest
+//! resolution available in both maps). Candidates are the 27-neighbourhood of the
+//! node's previous match (bootstrapping), or else the model nodes of the same level in
+//! a cube of `2 · resolution` around the transformed node. Per candidate the model
+//! surfel whose view direction is closest to the rotated scene view direction (within
+//! 60°) is tested against distance, colour, descriptor and contour gates; the closest
+//! passing pair becomes the node's one association. A candidate cell farther from the
+//! transformed mean than the best match so far is skipped without reading it (the mean
+//! lies inside its cell), which does not change the result.
+//!
+//! Nodes of one level are independent and processed in parallel; each writes only its
+//! own record. The pass can also sum the cost terms of the new associations (so that
+//! association and the LM system take one sweep), per level chunk in fixed slots.
+
+use super::evaluate::{Sum, SumInput, slot_offsets};
+use super::params::RegistrationParams;
+use super::workspace::{Association, NODE_CHUNK, Partial, PassState};
+use crate::frame::rays::VIEW_AXES;
+use crate::geometry::Pose;
+use crate::map::tree::octant;
+use crate::map::{MAX_LEVELS, NONE, Node, SELF_NEIGHBOR, descriptor_distance2, neighbor_index};
+use nalgebra::Vector3;
+use rayon::prelude::*;
+
+/// Per scene view direction, the model view directions within the angle gate, best
+/// first (they depend on the rotation only).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct DirCandidates {
+    dirs: [[u8; 6]; 6],
+    len: [u8; 6],
+}
+
+impl DirCandidates {
+    pub(crate) fn new(pose: &Pose, min_cos: f64) -> Self {
+        let r = pose.rotation.to_rotation_matrix();
+        let mut out = DirCandidates { dirs: [[0; 6]; 6], len: [0; 6] };
+        for (d, axis) in VIEW_AXES.iter().enumerate() {
+            let v = r * Vector3::new(axis[0] as f64, axis[1] as f64, axis[2] as f64);
+            let mut scored: [(f64, u8); 6] = [(0.0, 0); 6];
+            let mut n = 0;
+            for (k, m) in VIEW_AXES.iter().enumerate() {
+                let dot = v.x * m[0] as f64 + v.y * m[1] as f64 + v.z * m[2] as f64;
+                if dot >= min_cos {
+                    scored[n] = (dot, k as u8);
+                    n += 1;
+                }
+            }
+            scored[..n].sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+            for (slot, s) in out.dirs[d].iter_mut().zip(&scored[..n]) {
+                *slot = s.1;
+            }
+            out.len[d] = n as u8;
+        }
+        out
+    }
+
+    #[inline]
+    fn of(&self, dir: u8) -> &[u8] {
+        &self.dirs[dir as usize][..self.len[dir as usize] as usize]
+    }
+}
+
+/// Everything association reads.
+pub(crate) struct AssociationInput<'a> {
+    pub terms: &'a SumInput<'a>,
+    pub params: &'a RegistrationParams,
+    pub dirs: DirCandidates,
+}
+
+/// Associates all scene nodes (`fresh` ignores the previous matches) and sums `what`
+/// over the new associations. With `previous_cost`, also sums the LM cost of the
+/// previous associations at this pose (`Partial::previous_cost`): one term evaluation
+/// serves both where a node kept its pair. Returns the sums; `matched` counts the
+/// associations. The pass is recorded in `passes` for the cache.
+pub(crate) fn associate(
+    input: &AssociationInput,
+    assoc: &mut [Association],
+    partials: &mut [Partial],
+    passes: &mut Vec<PassState>,
+    fresh: bool,
+    what: Sum,
+    previous_cost: bool,
+) -> Partial {
+    let p = input.params;
+    let scene = input.terms.scene;
+    let pass = passes.len();
+    passes.push(PassState { rotation: input.terms.rotation, translation: input.terms.translation, dirs: input.dirs });
+    let passes = &passes[..];
+    let offsets = slot_offsets(scene, p.finest_level, p.coarsest_level);
+    for level in p.finest_level..=p.coarsest_level {
+        let range = scene.level_nodes(level);
+        let (coarser, finer) = assoc.split_at_mut(range.end);
+        let this = &mut coarser[range.start..];
+        let finer = Finer { assoc: finer, offset: range.end };
+        let slots = &mut partials[offsets[level]..offsets[level] + range.len().div_ceil(NODE_CHUNK)];
+        this.par_chunks_mut(NODE_CHUNK).zip(slots.par_iter_mut()).enumerate().for_each(|(c, (chunk, out))| {
+            let mut acc = Partial::ZERO;
+            for (k, a) in chunk.iter_mut().enumerate() {
+                let node = range.start + c * NODE_CHUNK + k;
+                let old = *a;
+                associate_node(input, passes, pass, node, a, &finer, fresh);
+                if a.is_matched() {
+                    acc.matched += 1;
+                    let cost_before = acc.cost;
+                    input.terms.accumulate(a, what, &mut acc);
+                    if previous_cost && old.is_matched() && what == Sum::LmSystem && a.same_pair(&old) {
+                        acc.previous_cost += acc.cost - cost_before;
+                        continue;
+                    }
+                }
+                if previous_cost && old.is_matched() {
+                    let mut prev = Partial::ZERO;
+                    input.terms.accumulate(&old, Sum::LmCost, &mut prev);
+                    acc.previous_cost += prev.cost;
+                }
+            }
+            *out = acc;
+        });
+    }
+    let mut total = Partial::ZERO;
+    partials[..offsets[MAX_LEVELS]].iter().for_each(|s| total.add(s));
+    total
+}
+
+/// The association records of the finer levels (the children of the level in work).
+struct Finer<'a> {
+    assoc: &'a [Association],
+    offset: usize,
+}
+
+impl Finer<'_> {
+    fn covers(&self, node: &Node) -> bool {
+        node.children
+            .iter()
+            .any(|&c| c != NONE && (c as usize) >= self.offset && self.assoc[c as usize - self.offset].covered)
+    }
+}
+
+/// A usable scene surfel of the node in work: index, mean, transformed mean.
+type Transformed = (u32, Vector3<f64>, Vector3<f64>);
+
+fn associate_node(
+    input: &AssociationInput,
+    passes: &[PassState],
+    pass: usize,
+    node_idx: usize,
+    a: &mut Association,
+    finer: &Finer,
+    fresh: bool,
+) {
+    let terms = input.terms;
+    let (scene, model) = (terms.scene, terms.model);
+    let node = &scene.nodes()[node_idx];
+    let previous = *a;
+    if finer.covers(node) {
+        *a = Association { covered: true, ..Association::NONE };
+        return;
+    }
+    let mut transformed: [Transformed; 6] = [(NONE, Vector3::zeros(), Vector3::zeros()); 6];
+    let mut n = 0;
+    for &s in node.surfels.iter().filter(|&&s| s != NONE) {
+        let sf = &scene.surfels()[s as usize];
+        if sf.usable() {
+            let mean = sf.mean.cast::<f64>();
+            transformed[n] = (s, mean, terms.rotation * mean + terms.translation);
+            n += 1;
+        }
+    }
+    let transformed = &transformed[..n];
+    if n == 0 {
+        *a = Association::NONE;
+        return;
+    }
+    let level = node.level as usize;
+    let res = model.resolution(level);
+    let radius = input.params.search_radius_cells * res;
+    let center = scene.node_center(node);
+    if !fresh && cache_holds(input, passes, &previous, transformed, &center, radius, level) {
+        *a = previous;
+        return;
+    }
+    let mut search = Search {
+        input,
+        node,
+        transformed,
+        res,
+        best: radius * radius,
+        second: radius * radius,
+        found: Association::NONE,
+    };
+    let cube = fresh || previous.model_node == NONE;
+    if cube {
+        let c = terms.rotation * center + terms.translation;
+        search.cube(&c, radius, level);
+    } else {
+        let key = model.nodes()[previous.model_node as usize].key;
+        let neighbors = model.neighbors(previous.model_node);
+        search.visit(neighbors[SELF_NEIGHBOR], key);
+        for (k, &m) in neighbors.iter().enumerate() {
+            if k != SELF_NEIGHBOR && m != NONE {
+                let d = [(k / 9) as i32 - 1, ((k / 3) % 3) as i32 - 1, (k % 3) as i32 - 1];
+                search.visit(m, [key[0] + d[0], key[1] + d[1], key[2] + d[2]]);
+            }
+        }
+    }
+    let mut result = search.found;
+    result.pass = pass as u16;
+    result.cube = cube;
+    // The next search would run over the same candidates only if this one did: a cube
+    // query that found nothing (the next is a cube query too), or a neighbourhood search
+    // that kept its match (the next searches the same neighbourhood).
+    let same_candidates = if cube { !result.is_matched() } else { result.model_node == previous.model_node };
+    result.valid_radius =
+        if !fresh && same_candidates { (0.5 * (search.second.sqrt() - search.best.sqrt())) as f32 } else { -1.0 };
+    *a = result;
+}
+
+/// Whether the previous search result of a node still holds at the current pose: the
+/// candidate set is the same (same view-direction gates, and for a cube query the same
+/// cube of cells) and no transformed mean moved by the valid radius, so no candidate can
+/// have overtaken the best match (the colour, descriptor and contour gates do not
+/// depend on the pose).
+fn cache_holds(
+    input: &AssociationInput,
+    passes: &[PassState],
+    previous: &Association,
+    transformed: &[Transformed],
+    center: &Vector3<f64>,
+    radius: f64,
+    level: usize,
+) -> bool {
+    if previous.valid_radius < 0.0 {
+        return false;
+    }
+    let then = &passes[previous.pass as usize];
+    let scene = input.terms.scene;
+    let limit = previous.valid_radius as f64;
+    for (s, mean, now) in transformed {
+        let dir = scene.surfels()[*s as usize].dir;
+        if then.dirs.of(dir) != input.dirs.of(dir) {
+            return false;
+        }
+        if (then.rotation * mean + then.translation - now).norm() >= limit {
+            return false;
+        }
+    }
+    if previous.cube {
+        let model = input.terms.model;
+        let cube_keys = |r: &nalgebra::Matrix3<f64>, t: &Vector3<f64>| {
+            let c = r * center + t;
+            (model.key_of(&(c - Vector3::repeat(radius)), level), model.key_of(&(c + Vector3::repeat(radius)), level))
+        };
+        if cube_keys(&then.rotation, &then.translation) != cube_keys(&input.terms.rotation, &input.terms.translation) {
+            return false;
+        }
+    }
+    true
+}
+
+struct Search<'a> {
+    input: &'a AssociationInput<'a>,
+    node: &'a Node,
+    transformed: &'a [Transformed],
+    res: f64,
+    /// Squared distance of the best match so far (initially the search radius²).
+    best: f64,
+    /// Lower bound of the squared distance of any other candidate that passes the
+    /// pose-independent gates (initially the search radius²: "no match").
+    second: f64,
+    found: Association,
+}
+
+impl Search<'_> {
+    /// Tests model node `m` whose cell key is `key`.
+    #[inline]
+    fn visit(&mut self, m: u32, key: [i32; 3]) {
+        if m == NONE {
+            return;
+        }
+        // The model mean lies in its cell: skip cells farther than the best match.
+        let near =
+            self.transformed.iter().map(|(_, _, p)| cell_distance2(p, key, self.res)).fold(f64::INFINITY, f64::min);
+        if near >= self.best {
+            self.second = self.second.min(near);
+            return;
+        }
+        let (model, scene) = (self.input.terms.model, self.input.terms.scene);
+        let p = self.input.params;
+        let mnode = &model.nodes()[m as usize];
+        if p.match_contours && mnode.border != self.node.border {
+            return;
+        }
+        for &(s, _, mu) in self.transformed {
+            let sf = &scene.surfels()[s as usize];
+            let Some(ms) = self
+                .input
+                .dirs
+                .of(sf.dir)
+                .iter()
+                .map(|&k| mnode.surfels[k as usize])
+                .find(|&ms| ms != NONE && model.surfels()[ms as usize].usable())
+            else {
+                continue;
+            };
+            let msf = &model.surfels()[ms as usize];
+            let dist2 = (msf.mean.cast::<f64>() - mu).norm_squared();
+            if dist2 >= self.second {
+                continue;
+            }
+            if p.use_color {
+                let dc = msf.color - sf.color;
+                if dc.x.abs() > p.luminance_gate || dc.y.abs() > p.chroma_gate || dc.z.abs() > p.chroma_gate {
+                    continue;
+                }
+            }
+            if p.use_descriptors
+                && descriptor_distance2(&model.descriptors()[ms as usize], &scene.descriptors()[s as usize])
+                    > p.descriptor_gate
+            {
+                continue;
+            }
+            if dist2 < self.best {
+                self.second = self.best;
+                self.best = dist2;
+                self.found = Association {
+                    covered: true,
+                    scene_surfel: s,
+                    model_node: m,
+                    model_surfel: ms,
+                    ..Association::NONE
+                };
+            } else {
+                self.second = dist2;
+            }
+        }
+    }
+}
+
+impl Search<'_> {
+    /// Visits every model node at `level` whose cell intersects the cube of half-size
+    /// `radius` (≤ 2 cells) around `center` — the cell containing the centre first, so
+    /// that the best match is found early — skipping cells that cannot beat the best
+    /// match before reading them.
+    ///
+    /// Nodes are found through the parent cell containing the centre: the cube spans at
+    /// most three parent cells per axis, all in that parent's 27-neighbourhood.
+    fn cube(&mut self, center: &Vector3<f64>, radius: f64, level: usize) {
+        let model = self.input.terms.model;
+        let lo = model.key_of(&(center - Vector3::repeat(radius)), level);
+        let hi = model.key_of(&(center + Vector3::repeat(radius)), level);
+        let k0 = model.key_of(center, level);
+        let top = level + 1 >= model.num_levels();
+        let parent = if top { None } else { model.find(level + 1, [k0[0] >> 1, k0[1] >> 1, k0[2] >> 1]) };
+        let lookup = |k: [i32; 3]| -> Option<u32> {
+            match parent {
+                Some(p0) => {
+                    let d = |i: usize| (k[i] >> 1) - (k0[i] >> 1);
+                    let pn = model.neighbors(p0)[neighbor_index(d(0), d(1), d(2))];
+                    if pn == NONE {
+                        return None;
+                    }
+                    let c = model.nodes()[pn as usize].children[octant(k)];
+                    (c != NONE).then_some(c)
+                }
+                None if top => model.find(level, k),
+                None => {
+                    let pn = model.find(level + 1, [k[0] >> 1, k[1] >> 1, k[2] >> 1])?;
+                    let c = model.nodes()[pn as usize].children[octant(k)];
+                    (c != NONE).then_some(c)
+                }
+            }
+        };
+        if let Some(m) = lookup(k0) {
+            self.visit(m, k0);
+        }
+        // Per axis, the smallest squared distance of any transformed mean to each cell
+        // slab: their sum bounds the distance to a cell from below.
+        let mut slab = [[f64::INFINITY; 5]; 3];
+        for (i, axis) in slab.iter_mut().enumerate() {
+            for (j, v) in axis.iter_mut().enumerate().take((hi[i] - lo[i] + 1) as usize) {
+                let cell_lo = (lo[i] + j as i32) as f64 * self.res;
+                for (_, _, p) in self.transformed {
+                    let d = (cell_lo - p[i]).max(p[i] - cell_lo - self.res).max(0.0);
+                    *v = v.min(d * d);
+                }
+            }
+        }
+        for (a, &dx) in slab[0].iter().enumerate().take((hi[0] - lo[0] + 1) as usize) {
+            if dx >= self.best {
+                self.second = self.second.min(dx);
+                continue;
+            }
+            for (b, &dy) in slab[1].iter().enumerate().take((hi[1] - lo[1] + 1) as usize) {
+                let dxy = dx + dy;
+                if dxy >= self.best {
+                    self.second = self.second.min(dxy);
+                    continue;
+                }
+                for (c, &dz) in slab[2].iter().enumerate().take((hi[2] - lo[2] + 1) as usize) {
+                    let k = [lo[0] + a as i32, lo[1] + b as i32, lo[2] + c as i32];
+                    let d = dxy + dz;
+                    if d >= self.best {
+                        // No memory read: a lower bound for the cache is all we need.
+                        self.second = self.second.min(d);
+                        continue;
+                    }
+                    if k != k0
+                        && let Some(m) = lookup(k)
+                    {
+                        self.visit(m, k);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Squared distance from `p` to the cell `key` of edge `res`.
+#[inline]
+fn cell_distance2(p: &Vector3<f64>, key: [i32; 3], res: f64) -> f64 {
+    let mut d2 = 0.0;
+    for i in 0..3 {
+        let lo = key[i] as f64 * res;
+        let d = (lo - p[i]).max(p[i] - lo - res).max(0.0);
+        d2 += d * d;
+    }
+    d2
+}

@@ -1,0 +1,260 @@
+//! Registration costs per association and their derivatives w.r.t. the left increment
+//! `δ = [ρ; ω]` of `model_from_scene` (conventions in `geometry::se3`).
+//!
+//! For an association of scene surfel `(μₛ, Σₛ)` with model surfel `(μₘ, Σₘ)` at the
+//! current pose `T = (R, t)`: `p = T μₛ`, `d = μₘ(p) − p`, `C = R Σₛ Rᵀ`, `Σ = Σₘ + C`
+//! (each covariance regularised by `a · res² · I`). With trilinear interpolation the
+//! model mean depends on `p` with Jacobian `M = ∂μₘ/∂p` (piecewise constant); without,
+//! `M = 0`. So `∂d/∂δ = −A ∂p/∂δ` with `A = I − M`; `∂p/∂δ = [I, −[p]×]`. (Ignoring
+//! `M` would make the model too stiff along surfaces, where the interpolated mean
+//! follows `p`, and LM would crawl.)
+//!
+//! - LM stage, weighted least squares (Eq. 5): `e = dᵀ Σ⁻¹ d` with `Σ` held fixed in the
+//!   derivatives: `J = ∂d/∂δ = −A [I, −[p]×]`, Gauss–Newton `H = JᵀΣ⁻¹J`, `g = JᵀΣ⁻¹d`.
+//! - Newton stage, log-likelihood (Eq. 4): `e = log det Σ + dᵀ Σ⁻¹ d` with the exact
+//!   gradient and Hessian, including the dependence of `Σ` on the rotation. With
+//!   `S = Σ⁻¹`, `u = S d`, `pᵢ = ∂p/∂δᵢ`, `Σᵢ = ∂Σ/∂δᵢ`:
+//!   `∂e/∂i = tr(SΣᵢ) − 2pᵢᵀu − uᵀΣᵢu` (where `pᵢ` stands for `A ∂p/∂δᵢ` and `pᵢⱼ` for
+//!   `A ∂²p/∂δᵢ∂δⱼ`: second derivatives of the interpolation are neglected),
+//!   `∂²e/∂i∂j = tr(SΣᵢⱼ) − tr(SΣⱼSΣᵢ) − 2pᵢⱼᵀu + 2pᵢᵀSpⱼ + 2pᵢᵀSΣⱼu + 2pⱼᵀSΣᵢu
+//!   + 2uᵀΣⱼSΣᵢu − uᵀΣᵢⱼu`, where for the rotation `pω_k = G_k p`,
+//!   `Σω_k = G_k C − C G_k`, `pω_kω_l = ½Q p`, `Σω_kω_l = ½(QC + CQ) − G_kCG_l − G_lCG_k`,
+//!   `Q = G_kG_l + G_lG_k`, `G_k = [e_k]×`; translation derivatives of `Σ` vanish.
+
+use crate::geometry::se3::skew;
+use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
+
+/// The inputs of one association at the current pose.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct TermInput {
+    /// Model mean (possibly interpolated).
+    pub model_mean: Vector3<f64>,
+    /// Model covariance incl. regularisation.
+    pub model_cov: Matrix3<f64>,
+    /// Transformed scene mean `T μₛ`.
+    pub p: Vector3<f64>,
+    /// Rotated scene covariance incl. regularisation, `R Σₛ Rᵀ`.
+    pub c: Matrix3<f64>,
+    /// `A = I − ∂μₘ/∂p`.
+    pub a: Matrix3<f64>,
+}
+
+/// `e = dᵀΣ⁻¹d`; `None` if `Σ` is singular.
+#[inline]
+pub(crate) fn mahalanobis(t: &TermInput) -> Option<f64> {
+    let s = (t.model_cov + t.c).try_inverse()?;
+    let d = t.model_mean - t.p;
+    Some(d.dot(&(s * d)))
+}
+
+/// `e = log det Σ + dᵀΣ⁻¹d`; `None` if `Σ` is not positive definite.
+#[inline]
+pub(crate) fn likelihood_cost(t: &TermInput) -> Option<f64> {
+    let sigma = t.model_cov + t.c;
+    let det = sigma.determinant();
+    if det.is_nan() || det <= 0.0 {
+        return None;
+    }
+    let s = sigma.try_inverse()?;
+    let d = t.model_mean - t.p;
+    Some(det.ln() + d.dot(&(s * d)))
+}
+
+/// LM stage: `(e, g, H)` with `g = JᵀΣ⁻¹d`, `H = JᵀΣ⁻¹J` (Eq. 5).
+#[inline]
+pub(crate) fn lm_term(t: &TermInput) -> Option<(f64, Vector6<f64>, Matrix6<f64>)> {
+    let s = (t.model_cov + t.c).try_inverse()?;
+    let d = t.model_mean - t.p;
+    let u = s * d;
+    let e = d.dot(&u);
+    // J = [−A, A [p]×]; with Sa = Aᵀ S A: H = [[Sa, −Sa[p]×], [[p]×ᵀ(−Sa)ᵀ…]], g = Jᵀu.
+    let at = t.a.transpose();
+    let au = at * u;
+    let sa = at * s * t.a;
+    let px = skew(&t.p);
+    let mut g = Vector6::zeros();
+    g.fixed_rows_mut::<3>(0).copy_from(&(-au));
+    g.fixed_rows_mut::<3>(3).copy_from(&(px.transpose() * au));
+    let s_px = sa * px;
+    let mut h = Matrix6::zeros();
+    h.fixed_view_mut::<3, 3>(0, 0).copy_from(&sa);
+    h.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-s_px));
+    h.fixed_view_mut::<3, 3>(3, 0).copy_from(&(-s_px.transpose()));
+    h.fixed_view_mut::<3, 3>(3, 3).copy_from(&(px.transpose() * s_px));
+    Some((e, g, h))
+}
+
+const GENERATORS: [Matrix3<f64>; 3] = [
+    Matrix3::new(0.0, 0.0, 0.0, 0.0, 0.0, -1.0, 0.0, 1.0, 0.0),
+    Matrix3::new(0.0, 0.0, 1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0),
+    Matrix3::new(0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+];
+
+/// Newton stage: `(e, ∇e, ∇²e)` of `e = log det Σ + dᵀΣ⁻¹d` (Eq. 4).
+pub(crate) fn likelihood_term(t: &TermInput) -> Option<(f64, Vector6<f64>, Matrix6<f64>)> {
+    let sigma = t.model_cov + t.c;
+    let det = sigma.determinant();
+    if det.is_nan() || det <= 0.0 {
+        return None;
+    }
+    let s = sigma.try_inverse()?;
+    let d = t.model_mean - t.p;
+    let u = s * d;
+    let e = det.ln() + d.dot(&u);
+    // First derivatives of p and Σ per parameter (Σ's vanish for translations).
+    let mut dp = [Vector3::zeros(); 6];
+    let mut ds = [Matrix3::zeros(); 3];
+    for k in 0..3 {
+        dp[k] = t.a.column(k).into_owned();
+        let g = &GENERATORS[k];
+        dp[3 + k] = t.a * (g * t.p);
+        ds[k] = g * t.c - t.c * g;
+    }
+    let s_ds: [Matrix3<f64>; 3] = std::array::from_fn(|k| s * ds[k]);
+    let ds_u: [Vector3<f64>; 3] = std::array::from_fn(|k| ds[k] * u);
+    let s_dp: [Vector3<f64>; 6] = std::array::from_fn(|i| s * dp[i]);
+    let mut grad = Vector6::zeros();
+    for i in 0..6 {
+        grad[i] = -2.0 * dp[i].dot(&u);
+    }
+    for k in 0..3 {
+        grad[3 + k] += s_ds[k].trace() - u.dot(&ds_u[k]);
+    }
+    let mut hess = Matrix6::zeros();
+    for i in 0..6 {
+        for j in i..6 {
+            let mut v = 2.0 * dp[i].dot(&s_dp[j]);
+            if j >= 3 {
+                v += 2.0 * s_dp[i].dot(&ds_u[j - 3]);
+            }
+            if i >= 3 {
+                let (k, l) = (i - 3, j - 3);
+                let (gk, gl) = (&GENERATORS[k], &GENERATORS[l]);
+                let q = gk * gl + gl * gk;
+                let dp_ij = 0.5 * t.a * (q * t.p);
+                let ds_ij = 0.5 * (q * t.c + t.c * q) - gk * t.c * gl - gl * t.c * gk;
+                v += 2.0 * s_dp[j].dot(&ds_u[k]) + (s * ds_ij).trace()
+                    - 2.0 * dp_ij.dot(&u)
+                    - u.dot(&(ds_ij * u))
+                    - (s_ds[l] * s_ds[k]).trace()
+                    + 2.0 * ds_u[l].dot(&(s * ds_u[k]));
+            }
+            hess[(i, j)] = v;
+            hess[(j, i)] = v;
+        }
+    }
+    Some((e, grad, hess))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::Pose;
+    use crate::geometry::se3::compose_left;
+    use nalgebra::{Point3, Translation3, UnitQuaternion};
+    use proptest::prelude::*;
+
+    fn spd(a: [f64; 6], scale: f64) -> Matrix3<f64> {
+        let l = Matrix3::new(a[0], 0.0, 0.0, a[1], a[2], 0.0, a[3], a[4], a[5]);
+        l * l.transpose() * scale + Matrix3::identity() * 1e-6
+    }
+
+    /// The term at pose `ΔT(δ)·T`, with a model mean that moves linearly with `p`:
+    /// `μₘ(p) = μₘ + M (p − p₀)`, as trilinear interpolation does within a cell.
+    fn term_at(delta: &Vector6<f64>, c: &Case) -> TermInput {
+        let (pose, mu_s, cov_s, mu_m, cov_m, m) = c;
+        let p0 = (pose * Point3::from(*mu_s)).coords;
+        let t = compose_left(delta, pose);
+        let r = t.rotation.to_rotation_matrix().into_inner();
+        let p = (t * Point3::from(*mu_s)).coords;
+        TermInput {
+            model_mean: mu_m + m * (p - p0),
+            model_cov: *cov_m,
+            p,
+            c: r * cov_s * r.transpose(),
+            a: Matrix3::identity() - m,
+        }
+    }
+
+    type Case = (Pose, Vector3<f64>, Matrix3<f64>, Vector3<f64>, Matrix3<f64>, Matrix3<f64>);
+
+    fn case() -> impl Strategy<Value = Case> {
+        (
+            prop::array::uniform3(-0.5f64..0.5),
+            prop::array::uniform3(-0.8f64..0.8),
+            prop::array::uniform3(-1.0f64..1.0),
+            prop::array::uniform6(-1.0f64..1.0),
+            prop::array::uniform3(-0.05f64..0.05),
+            prop::array::uniform6(-1.0f64..1.0),
+            prop::array::uniform3(-0.6f64..0.6),
+        )
+            .prop_map(|(t, w, mu, cs, dm, cm, mm)| {
+                let pose = Pose::from_parts(
+                    Translation3::new(t[0], t[1], t[2]),
+                    UnitQuaternion::from_scaled_axis(Vector3::new(w[0], w[1], w[2])),
+                );
+                let mu_s = Vector3::new(mu[0], mu[1], mu[2] + 2.0);
+                let mu_m = (pose * Point3::from(mu_s)).coords + Vector3::new(dm[0], dm[1], dm[2]);
+                // An interpolation Jacobian like a plane's: M = I − n nᵀ scaled.
+                let n = Vector3::new(mm[0], mm[1], 1.0).normalize();
+                let m = (Matrix3::identity() - n * n.transpose()) * (0.5 + mm[2]);
+                (pose, mu_s, spd(cs, 1e-3), mu_m, spd(cm, 1e-3), m)
+            })
+    }
+
+    fn unit(i: usize, eps: f64) -> Vector6<f64> {
+        let mut v = Vector6::zeros();
+        v[i] = eps;
+        v
+    }
+
+    proptest! {
+        #[test]
+        fn likelihood_derivatives_match_finite_differences(c in case()) {
+            // e as a function of the left increment δ at the fixed pose T: e(ΔT(δ)·T).
+            let e = |d: &Vector6<f64>| likelihood_term(&term_at(d, &c)).unwrap().0;
+            let (e0, g, h) = likelihood_term(&term_at(&Vector6::zeros(), &c)).unwrap();
+            prop_assert!((likelihood_cost(&term_at(&Vector6::zeros(), &c)).unwrap() - e0).abs() < 1e-9 * (1.0 + e0.abs()));
+            let scale = 1.0 + h.amax();
+            for i in 0..6 {
+                let ge = 1e-6;
+                let num_g = (e(&unit(i, ge)) - e(&(-unit(i, ge)))) / (2.0 * ge);
+                prop_assert!((num_g - g[i]).abs() < 1e-6 * scale, "grad {i}: {num_g} vs {}", g[i]);
+                let eps = 1e-4;
+                for j in 0..6 {
+                    let (a, b) = (unit(i, eps), unit(j, eps));
+                    let num_h = if i == j {
+                        (e(&a) - 2.0 * e0 + e(&(-a))) / (eps * eps)
+                    } else {
+                        (e(&(a + b)) - e(&(a - b)) - e(&(b - a)) + e(&(-a - b))) / (4.0 * eps * eps)
+                    };
+                    prop_assert!((num_h - h[(i, j)]).abs() < 1e-4 * scale, "hess {i},{j}: {num_h} vs {}", h[(i, j)]);
+                }
+            }
+        }
+
+        #[test]
+        fn lm_gradient_and_hessian_match_finite_differences(c in case()) {
+            let t0 = term_at(&Vector6::zeros(), &c);
+            let (e0, g, h) = lm_term(&t0).unwrap();
+            prop_assert!((mahalanobis(&t0).unwrap() - e0).abs() < 1e-9 * (1.0 + e0));
+            let s = (t0.model_cov + t0.c).try_inverse().unwrap();
+            // ½ dᵀ S d with S fixed: its gradient is g, its Gauss–Newton Hessian is H.
+            let f = |d: &Vector6<f64>| {
+                let t = term_at(d, &c);
+                let r = t.model_mean - t.p;
+                0.5 * r.dot(&(s * r))
+            };
+            let eps = 1e-6;
+            let mut j = nalgebra::Matrix3x6::zeros();
+            for i in 0..6 {
+                let num = (f(&unit(i, eps)) - f(&(-unit(i, eps)))) / (2.0 * eps);
+                prop_assert!((num - g[i]).abs() < 1e-5 * (1.0 + g[i].abs()), "grad {i}: {num} vs {}", g[i]);
+                let (a, b) = (term_at(&unit(i, eps), &c), term_at(&(-unit(i, eps)), &c));
+                j.set_column(i, &(((a.model_mean - a.p) - (b.model_mean - b.p)) / (2.0 * eps)));
+            }
+            let num_h = j.transpose() * s * j;
+            prop_assert!((num_h - h).norm() < 1e-4 * (1.0 + h.norm()));
+        }
+    }
+}

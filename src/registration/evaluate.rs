@@ -1,0 +1,206 @@
+//! Per-association terms at the current pose and their sums over all associations.
+//!
+//! Sums run per resolution level over fixed chunks of nodes, each chunk into its own
+//! slot, and the slots are added in index order: the result is bit-identical for any
+//! number of threads.
+
+use super::cost::{TermInput, likelihood_cost, likelihood_term, lm_term, mahalanobis};
+use super::params::RegistrationParams;
+use super::workspace::{Association, NODE_CHUNK, Partial};
+use crate::geometry::Pose;
+use crate::map::{MAX_LEVELS, NONE, Surfel, SurfelMap, neighbor_index};
+use nalgebra::{Matrix3, Vector3};
+use rayon::prelude::*;
+
+/// What to sum.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Sum {
+    /// `½ Σ e` of Eq. (5) only.
+    LmCost,
+    /// `½ Σ e`, `Σ JᵀΣ⁻¹d`, `Σ JᵀΣ⁻¹J` of Eq. (5).
+    LmSystem,
+    /// `Σ e` of Eq. (4) only.
+    LikelihoodCost,
+    /// `Σ e`, gradient and Hessian of Eq. (4).
+    LikelihoodSystem,
+}
+
+/// The maps, the pose and the settings the terms read.
+pub(crate) struct SumInput<'a> {
+    pub model: &'a SurfelMap,
+    pub scene: &'a SurfelMap,
+    pub rotation: Matrix3<f64>,
+    pub translation: Vector3<f64>,
+    pub interpolate: bool,
+    /// `a · res²` per level.
+    pub regularization: [f64; MAX_LEVELS],
+}
+
+impl<'a> SumInput<'a> {
+    pub(crate) fn new(
+        model: &'a SurfelMap,
+        scene: &'a SurfelMap,
+        pose: &Pose,
+        params: &RegistrationParams,
+        interpolate: bool,
+    ) -> Self {
+        let mut regularization = [0.0; MAX_LEVELS];
+        for (l, r) in regularization.iter_mut().enumerate().take(scene.num_levels()) {
+            let res = scene.resolution(l);
+            *r = params.covariance_regularization * res * res;
+        }
+        SumInput {
+            model,
+            scene,
+            rotation: pose.rotation.to_rotation_matrix().into_inner(),
+            translation: pose.translation.vector,
+            interpolate,
+            regularization,
+        }
+    }
+
+    /// The inputs of one association.
+    #[inline]
+    pub(crate) fn term(&self, a: &Association) -> TermInput {
+        let ss = &self.scene.surfels()[a.scene_surfel as usize];
+        let ms = &self.model.surfels()[a.model_surfel as usize];
+        let level = self.scene.nodes()[ss.node as usize].level as usize;
+        let reg = Matrix3::identity() * self.regularization[level];
+        let r = &self.rotation;
+        let p = r * ss.mean.cast::<f64>() + self.translation;
+        let c = r * ss.cov.cast::<f64>() * r.transpose() + reg;
+        let m = if self.interpolate {
+            interpolate(self.model, a.model_node, ms.dir, &p, self.model.resolution(level))
+        } else {
+            Interpolated::of(ms)
+        };
+        TermInput { model_mean: m.mean, model_cov: m.cov + reg, p, c, a: Matrix3::identity() - m.jacobian }
+    }
+
+    /// Adds the term of one association to `acc`.
+    #[inline]
+    pub(crate) fn accumulate(&self, a: &Association, what: Sum, acc: &mut Partial) {
+        let t = self.term(a);
+        let ok = match what {
+            Sum::LmCost => mahalanobis(&t).map(|e| acc.cost += 0.5 * e),
+            Sum::LikelihoodCost => likelihood_cost(&t).map(|e| acc.cost += e),
+            Sum::LmSystem => lm_term(&t).map(|(e, g, h)| acc.add_term(0.5 * e, &g, &h)),
+            Sum::LikelihoodSystem => likelihood_term(&t).map(|(e, g, h)| acc.add_term(e, &g, &h)),
+        };
+        if ok.is_some() {
+            acc.count += 1;
+        }
+    }
+}
+
+/// A model surfel, possibly interpolated at a point.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Interpolated {
+    pub mean: Vector3<f64>,
+    pub cov: Matrix3<f64>,
+    /// `∂mean/∂p` (zero for a single surfel).
+    pub jacobian: Matrix3<f64>,
+}
+
+impl Interpolated {
+    fn of(s: &Surfel) -> Self {
+        Interpolated { mean: s.mean.cast::<f64>(), cov: s.cov.cast::<f64>(), jacobian: Matrix3::zeros() }
+    }
+}
+
+/// Trilinear interpolation of the model surfels of view direction `dir` at `p` (§4.3).
+///
+/// If `p` lies within one cell of the matched node's centre, the (up to) 8 cells of the
+/// node's 27-neighbourhood whose centres are within one cell of `p` on every axis are
+/// blended with weights `wᵢ = Π (1 − |cᵢ − pᵢ| / res)`; otherwise, or if no such cell
+/// holds a usable surfel, the matched surfel itself is returned. The Jacobian of the
+/// blended mean is `Σ (μᵢ − μ) ∇wᵢᵀ / Σ wᵢ`.
+pub(crate) fn interpolate(model: &SurfelMap, node: u32, dir: u8, p: &Vector3<f64>, res: f64) -> Interpolated {
+    let nodes = model.nodes();
+    let surfels = model.surfels();
+    let matched = || Interpolated::of(&surfels[nodes[node as usize].surfels[dir as usize] as usize]);
+    let off = (p - model.node_center(&nodes[node as usize])) / res;
+    if off.amax() > 1.0 {
+        return matched();
+    }
+    let step = off.map(|o| if o >= 0.0 { 1 } else { -1 });
+    let neighbors = model.neighbors(node);
+    let (mut sw, mut mean, mut cov) = (0.0, Vector3::zeros(), Matrix3::zeros());
+    let mut cells: [(f64, Vector3<f64>, Vector3<f64>); 8] = [(0.0, Vector3::zeros(), Vector3::zeros()); 8];
+    let mut n = 0;
+    for dx in [0, step.x] {
+        for dy in [0, step.y] {
+            for dz in [0, step.z] {
+                let nb = neighbors[neighbor_index(dx, dy, dz)];
+                if nb == NONE {
+                    continue;
+                }
+                let s = nodes[nb as usize].surfels[dir as usize];
+                if s == NONE || !surfels[s as usize].usable() {
+                    continue;
+                }
+                let r = off - Vector3::new(dx as f64, dy as f64, dz as f64);
+                let f = r.map(|v| 1.0 - v.abs());
+                let w = f.x * f.y * f.z;
+                if w > 0.0 {
+                    let sf = &surfels[s as usize];
+                    let mu = sf.mean.cast::<f64>();
+                    sw += w;
+                    mean += mu * w;
+                    cov += sf.cov.cast::<f64>() * w;
+                    // ∂w/∂p: each factor 1 − |r| falls by sign(r)/res along its axis.
+                    let grad =
+                        Vector3::new(-r.x.signum() * f.y * f.z, -r.y.signum() * f.x * f.z, -r.z.signum() * f.x * f.y)
+                            / res;
+                    cells[n] = (w, mu, grad);
+                    n += 1;
+                }
+            }
+        }
+    }
+    if sw <= 1e-6 {
+        return matched();
+    }
+    let mean = mean / sw;
+    let jacobian = cells[..n].iter().map(|(_, mu, grad)| (mu - mean) * grad.transpose()).sum::<Matrix3<f64>>() / sw;
+    Interpolated { mean, cov: cov / sw, jacobian }
+}
+
+/// The slot of every (level, chunk) pair: levels from `finest` to `coarsest`, chunks of
+/// `NODE_CHUNK` nodes within a level.
+pub(crate) fn slot_offsets(scene: &SurfelMap, finest: usize, coarsest: usize) -> [usize; MAX_LEVELS + 1] {
+    let mut offsets = [0; MAX_LEVELS + 1];
+    let mut next = 0;
+    for (level, offset) in offsets.iter_mut().enumerate().take(coarsest + 1).skip(finest) {
+        *offset = next;
+        next += scene.level_nodes(level).len().div_ceil(NODE_CHUNK);
+    }
+    offsets[MAX_LEVELS] = next;
+    offsets
+}
+
+/// Sums `what` over all associations into `partials` (one per level chunk) and returns
+/// the total.
+pub(crate) fn sum(
+    input: &SumInput,
+    assoc: &[Association],
+    partials: &mut [Partial],
+    levels: (usize, usize),
+    what: Sum,
+) -> Partial {
+    let offsets = slot_offsets(input.scene, levels.0, levels.1);
+    for level in levels.0..=levels.1 {
+        let range = input.scene.level_nodes(level);
+        let slots = &mut partials[offsets[level]..offsets[level] + range.len().div_ceil(NODE_CHUNK)];
+        assoc[range].par_chunks(NODE_CHUNK).zip(slots.par_iter_mut()).for_each(|(chunk, out)| {
+            let mut acc = Partial::ZERO;
+            for a in chunk.iter().filter(|a| a.is_matched()) {
+                input.accumulate(a, what, &mut acc);
+            }
+            *out = acc;
+        });
+    }
+    let mut total = Partial::ZERO;
+    partials[..offsets[MAX_LEVELS]].iter().for_each(|p| total.add(p));
+    total
+}

@@ -1,0 +1,332 @@
+//! Registration of multi-resolution surfel maps (paper §4).
+//!
+//! [`register`] finds `model_from_scene`, the pose that maps scene-map coordinates into
+//! the model map, starting from an initial guess:
+//!
+//! 1. associate surfels across resolutions (§4.1, [`associate`]);
+//! 2. Levenberg–Marquardt on the weighted least squares of Eq. (5), re-associating
+//!    after every accepted step (bootstrapped from the previous matches) and once from
+//!    scratch before declaring convergence;
+//! 3. Newton's method on the log-likelihood of Eq. (4) with trilinear interpolation of
+//!    the model surfels (§4.3), keeping the best iterate;
+//! 4. the pose covariance in closed form, Eq. (6).
+//!
+//! Poses are a translation and a unit quaternion; increments are composed on the left
+//! (`geometry::se3`). All scratch lives in a [`RegistrationWorkspace`]: nothing is
+//! allocated here.
+
+mod associate;
+mod cost;
+mod evaluate;
+pub mod params;
+mod workspace;
+
+pub use params::{RegistrationParams, RegistrationParamsError};
+pub use workspace::RegistrationWorkspace;
+
+use crate::geometry::Pose;
+use crate::geometry::se3::compose_left;
+use crate::map::SurfelMap;
+use associate::{AssociationInput, DirCandidates, associate};
+use evaluate::{Sum, SumInput, sum};
+use nalgebra::{Matrix6, Vector6};
+use thiserror::Error;
+use workspace::Partial;
+
+/// Why a registration failed. The pose it returns with is the initial guess.
+#[derive(Debug, Error, Clone, Copy, PartialEq)]
+pub enum RegistrationError {
+    /// Too few surfels matched: the maps do not overlap (or one is empty).
+    #[error("too few associations ({found}, need {needed}): the maps do not overlap")]
+    TooFewAssociations {
+        /// Associations found.
+        found: usize,
+        /// Associations needed.
+        needed: usize,
+    },
+    /// Too small a part of the scene matched the model at the end: the views do not
+    /// show the same surfaces, whatever pose was found.
+    #[error("only {:.0}% of the scene matched the model (need {:.0}%): the views do not overlap", overlap * 100.0, needed * 100.0)]
+    PoorOverlap {
+        /// Fraction matched.
+        overlap: f64,
+        /// Fraction needed.
+        needed: f64,
+    },
+    /// The data do not constrain the pose (a plain wall, a corridor): the standard
+    /// deviation of the estimate (Eq. 6) along its worst direction is too large.
+    #[error(
+        "degenerate geometry: the pose is not constrained (std up to {translation_std_m:.4} m, {rotation_std_rad:.4} rad)"
+    )]
+    Degenerate {
+        /// Largest standard deviation of the translation (m), along its worst direction.
+        translation_std_m: f64,
+        /// Largest standard deviation of the rotation (rad).
+        rotation_std_rad: f64,
+    },
+    /// The initial guess is not finite.
+    #[error("the initial pose is not finite")]
+    NotFinite,
+    /// The scene map is larger than the workspace.
+    #[error("scene map has {nodes} nodes, the workspace holds {capacity}")]
+    WorkspaceTooSmall {
+        /// Scene nodes.
+        nodes: usize,
+        /// Workspace capacity.
+        capacity: usize,
+    },
+    /// The parameters do not fit the maps.
+    #[error(transparent)]
+    Params(#[from] RegistrationParamsError),
+}
+
+/// The result of a successful registration.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Registration {
+    /// The estimate: maps scene coordinates into the model frame.
+    pub model_from_scene: Pose,
+    /// Covariance of the left increment `[ρ; ω]` of the estimate (Eq. 6).
+    pub covariance: Matrix6<f64>,
+    /// Associations at the final pose.
+    pub associations: usize,
+    /// LM iterations run.
+    pub lm_iterations: usize,
+    /// Newton iterations that improved the likelihood.
+    pub newton_iterations: usize,
+    /// LM stopped on a small step with fresh associations (not on the iteration limit).
+    pub converged: bool,
+    /// Mean of `dᵀΣ⁻¹d` over the final associations (≈ 3 for a good fit).
+    pub mean_mahalanobis2: f64,
+    /// Fraction of the scene's usable surfels that are associated (or covered by an
+    /// associated finer surfel).
+    pub overlap: f64,
+}
+
+/// Registers `scene` to `model` starting from `initial` (`model_from_scene`).
+pub fn register(
+    model: &SurfelMap,
+    scene: &SurfelMap,
+    initial: &Pose,
+    params: &RegistrationParams,
+    ws: &mut RegistrationWorkspace,
+) -> Result<Registration, RegistrationError> {
+    params.validate(model.num_levels().min(scene.num_levels()))?;
+    let nodes = scene.nodes().len();
+    if nodes > ws.capacity() {
+        return Err(RegistrationError::WorkspaceTooSmall { nodes, capacity: ws.capacity() });
+    }
+    if !is_finite(initial) {
+        return Err(RegistrationError::NotFinite);
+    }
+    ws.reset(nodes);
+    let mut solver = Solver { model, scene, params, ws, pose: *initial };
+    let (lm_iterations, converged) = solver.levenberg_marquardt()?;
+    let newton_iterations = solver.newton()?;
+    let overlap = solver.overlap();
+    if overlap < params.min_overlap {
+        return Err(RegistrationError::PoorOverlap { overlap, needed: params.min_overlap });
+    }
+    let (covariance, associations, mean_mahalanobis2) = solver.covariance()?;
+    Ok(Registration {
+        model_from_scene: solver.pose,
+        covariance,
+        associations,
+        lm_iterations,
+        newton_iterations,
+        converged,
+        mean_mahalanobis2,
+        overlap,
+    })
+}
+
+struct Solver<'a> {
+    model: &'a SurfelMap,
+    scene: &'a SurfelMap,
+    params: &'a RegistrationParams,
+    ws: &'a mut RegistrationWorkspace,
+    pose: Pose,
+}
+
+impl Solver<'_> {
+    fn levels(&self) -> (usize, usize) {
+        (self.params.finest_level, self.params.coarsest_level)
+    }
+
+    /// §4.1 at the current pose, summing `what` over the new associations in the same
+    /// sweep (and with `previous_cost` the LM cost of the previous associations).
+    fn associate(&mut self, fresh: bool, what: Sum, interpolate: bool, previous_cost: bool) -> Partial {
+        let terms = SumInput::new(self.model, self.scene, &self.pose, self.params, interpolate);
+        let dirs = DirCandidates::new(&self.pose, self.params.view_dir_min_cos);
+        let input = AssociationInput { terms: &terms, params: self.params, dirs };
+        let ws = &mut *self.ws;
+        associate(&input, &mut ws.assoc, &mut ws.partials, &mut ws.passes, fresh, what, previous_cost)
+    }
+
+    /// Like [`Self::associate`], failing when too few associations remain.
+    fn associate_enough(&mut self, fresh: bool, what: Sum, interpolate: bool) -> Result<Partial, RegistrationError> {
+        let total = self.associate(fresh, what, interpolate, false);
+        self.enough(&total)?;
+        Ok(total)
+    }
+
+    fn enough(&self, total: &Partial) -> Result<(), RegistrationError> {
+        let (found, needed) = (total.matched as usize, self.params.min_associations);
+        if found < needed { Err(RegistrationError::TooFewAssociations { found, needed }) } else { Ok(()) }
+    }
+
+    /// `what` at `pose` over the current associations.
+    fn sum_at(&mut self, pose: &Pose, what: Sum, interpolate: bool) -> Partial {
+        let terms = SumInput::new(self.model, self.scene, pose, self.params, interpolate);
+        let levels = self.levels();
+        sum(&terms, &self.ws.assoc, &mut self.ws.partials, levels, what)
+    }
+
+    /// Levenberg–Marquardt on Eq. (5) (Madsen, Nielsen & Tingleff's damping update),
+    /// re-associating after every step; converged when a small step was taken with
+    /// freshly searched associations.
+    ///
+    /// The gain ratio needs the cost of the current associations at the candidate pose;
+    /// it is summed in the same sweep that re-associates at the candidate. A rejected
+    /// candidate restores the previous associations.
+    fn levenberg_marquardt(&mut self) -> Result<(usize, bool), RegistrationError> {
+        let p = self.params;
+        let interpolate = p.interpolate_lm;
+        let mut fresh = true;
+        let mut sys = self.associate_enough(fresh, Sum::LmSystem, interpolate)?;
+        let max_diag = (0..6).map(|i| sys.hessian[(i, i)]).fold(0.0, f64::max);
+        let mut mu = p.lm_tau * max_diag;
+        let mut nu = 2.0;
+        for it in 1..=p.lm_max_iterations {
+            let damped = sys.hessian + Matrix6::identity() * mu;
+            let Some(chol) = damped.cholesky() else {
+                mu *= nu;
+                nu *= 2.0;
+                continue;
+            };
+            let delta = -chol.solve(&sys.gradient);
+            let candidate = compose_left(&delta, &self.pose);
+            let predicted = 0.5 * delta.dot(&(mu * delta - sys.gradient));
+            let small = step_is_small(&delta, p);
+            if small && fresh {
+                // The last step: only its cost is needed, no new associations.
+                let cost = self.sum_at(&candidate, Sum::LmCost, interpolate).cost;
+                if (sys.cost - cost) / predicted > 0.0 && cost.is_finite() && is_finite(&candidate) {
+                    self.pose = candidate;
+                }
+                return Ok((it, true));
+            }
+            // Re-associate at the candidate (from scratch after a small step), summing the
+            // current associations' cost there for the gain ratio.
+            self.ws.assoc_backup.copy_from_slice(&self.ws.assoc);
+            let current = self.pose;
+            self.pose = candidate;
+            let next = self.associate(small, Sum::LmSystem, interpolate, true);
+            let rho = (sys.cost - next.previous_cost) / predicted;
+            if rho > 0.0 && next.previous_cost.is_finite() && is_finite(&candidate) && self.enough(&next).is_ok() {
+                mu *= (1.0f64 / 3.0).max(1.0 - (2.0 * rho - 1.0).powi(3));
+                nu = 2.0;
+                sys = next;
+                fresh = small;
+                continue;
+            }
+            self.pose = current;
+            self.ws.assoc.copy_from_slice(&self.ws.assoc_backup);
+            if small {
+                // A rejected step below the tolerance: the cost cannot be lowered further at
+                // this resolution of the (piecewise smooth, interpolated) cost. Check once
+                // with associations searched from scratch.
+                if fresh {
+                    return Ok((it, true));
+                }
+                fresh = true;
+                sys = self.associate_enough(fresh, Sum::LmSystem, interpolate)?;
+                continue;
+            }
+            mu *= nu;
+            nu *= 2.0;
+            if mu > 1e12 * max_diag.max(1e-300) || !mu.is_finite() {
+                return Ok((it, fresh));
+            }
+        }
+        Ok((p.lm_max_iterations, false))
+    }
+
+    /// Newton's method on the log-likelihood Eq. (4) with interpolation, starting from
+    /// LM's last associations; stops when a step does not improve the likelihood.
+    fn newton(&mut self) -> Result<usize, RegistrationError> {
+        let interpolate = self.params.interpolate;
+        let mut improved = 0;
+        for it in 0..self.params.newton_iterations {
+            let sys = if it == 0 {
+                let pose = self.pose;
+                self.sum_at(&pose, Sum::LikelihoodSystem, interpolate)
+            } else {
+                self.associate_enough(false, Sum::LikelihoodSystem, interpolate)?
+            };
+            let Some(chol) = sys.hessian.cholesky() else { break };
+            let delta = -chol.solve(&sys.gradient);
+            let candidate = compose_left(&delta, &self.pose);
+            let cost = self.sum_at(&candidate, Sum::LikelihoodCost, interpolate).cost;
+            if cost.is_nan() || cost >= sys.cost || !is_finite(&candidate) {
+                break;
+            }
+            self.pose = candidate;
+            improved += 1;
+            if step_is_small(&delta, self.params) {
+                break;
+            }
+        }
+        Ok(improved)
+    }
+
+    /// Fraction of scene nodes with a usable surfel that are associated or covered.
+    fn overlap(&self) -> f64 {
+        let (finest, coarsest) = self.levels();
+        let mut candidates = 0usize;
+        let mut covered = 0usize;
+        for level in finest..=coarsest {
+            for i in self.scene.level_nodes(level) {
+                let node = &self.scene.nodes()[i];
+                if node.surfels.iter().any(|&s| s != crate::map::NONE && self.scene.surfels()[s as usize].usable()) {
+                    candidates += 1;
+                    covered += usize::from(self.ws.assoc[i].covered);
+                }
+            }
+        }
+        covered as f64 / candidates.max(1) as f64
+    }
+
+    /// Eq. (6): `Cov = H⁻¹ (Σ ∂²e/∂x∂z Cov(z) ∂²e/∂x∂zᵀ) H⁻¹`. With `z` the associated
+    /// means and `Cov(z)` their covariances, the middle term of association `j` is
+    /// `Jⱼᵀ Σⱼ⁻¹ Jⱼ`, the same as its Gauss–Newton Hessian block; with unit weights the
+    /// sandwich reduces to `H⁻¹`, computed here as such.
+    fn covariance(&mut self) -> Result<(Matrix6<f64>, usize, f64), RegistrationError> {
+        let pose = self.pose;
+        let sys = self.sum_at(&pose, Sum::LmSystem, self.params.interpolate_lm);
+        let h = (sys.hessian + sys.hessian.transpose()) * 0.5;
+        let unconstrained =
+            RegistrationError::Degenerate { translation_std_m: f64::INFINITY, rotation_std_rad: f64::INFINITY };
+        let cov = h.cholesky().ok_or(unconstrained)?.inverse();
+        // The worst direction of each block: the largest eigenvalue of its 3×3 covariance.
+        let worst = |offset: usize| {
+            let block: nalgebra::Matrix3<f64> = cov.fixed_view::<3, 3>(offset, offset).into_owned();
+            crate::geometry::eigen3::symmetric_eigenvalues(&block)[2].max(0.0).sqrt()
+        };
+        let (translation_std_m, rotation_std_rad) = (worst(0), worst(3));
+        let within = translation_std_m <= self.params.max_translation_std_m
+            && rotation_std_rad <= self.params.max_rotation_std_rad;
+        if !within {
+            return Err(RegistrationError::Degenerate { translation_std_m, rotation_std_rad });
+        }
+        let mean = 2.0 * sys.cost / sys.count.max(1) as f64;
+        Ok((cov, sys.count as usize, mean))
+    }
+}
+
+fn step_is_small(delta: &Vector6<f64>, p: &RegistrationParams) -> bool {
+    delta.fixed_rows::<3>(0).norm() < p.step_tolerance_m && delta.fixed_rows::<3>(3).norm() < p.step_tolerance_rad
+}
+
+fn is_finite(pose: &Pose) -> bool {
+    pose.translation.vector.iter().all(|v| v.is_finite()) && pose.rotation.coords.iter().all(|v| v.is_finite())
+}

@@ -1,0 +1,143 @@
+//! Parameters of map registration (paper §4).
+
+use thiserror::Error;
+
+/// Why registration parameters were rejected.
+#[derive(Debug, Error, Clone, Copy, PartialEq)]
+#[error("registration parameter {name} = {value} is out of range ({expected})")]
+pub struct RegistrationParamsError {
+    /// Parameter name.
+    pub name: &'static str,
+    /// The value given.
+    pub value: f64,
+    /// What is allowed.
+    pub expected: &'static str,
+}
+
+/// How two maps are registered.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RegistrationParams {
+    /// Finest level that takes part (0 = the map's finest).
+    pub finest_level: usize,
+    /// Coarsest level that takes part; all levels in between are used together in every
+    /// iteration, each region at the finest level that matches (§4.1).
+    pub coarsest_level: usize,
+    /// Levenberg–Marquardt iterations at most (§4.3).
+    pub lm_max_iterations: usize,
+    /// Newton iterations on the full log-likelihood after LM (§4.3).
+    pub newton_iterations: usize,
+    /// Candidates are searched in a cube of this many cell edges around the
+    /// transformed node (the paper: twice the resolution).
+    pub search_radius_cells: f64,
+    /// Minimum cosine between the rotated scene view direction and the model surfel's
+    /// view direction (0.5 = 60°).
+    pub view_dir_min_cos: f64,
+    /// Use colour gates on association.
+    pub use_color: bool,
+    /// Largest luminance difference of associated surfels.
+    pub luminance_gate: f32,
+    /// Largest α or β difference of associated surfels.
+    pub chroma_gate: f32,
+    /// Use shape–texture descriptors to gate associations (§3.2).
+    pub use_descriptors: bool,
+    /// Largest squared descriptor distance τ of associated surfels.
+    pub descriptor_gate: f32,
+    /// Contour surfels only match contour surfels (§3.4).
+    pub match_contours: bool,
+    /// Each surfel covariance gets `factor · resolution² · I` added, so that planar
+    /// surfels stay invertible (original code: 0.001).
+    pub covariance_regularization: f64,
+    /// LM damping start relative to the largest Hessian diagonal entry (τ).
+    pub lm_tau: f64,
+    /// LM has converged when an accepted step moves less than this (m) …
+    pub step_tolerance_m: f64,
+    /// … and rotates less than this (rad), with freshly searched associations.
+    pub step_tolerance_rad: f64,
+    /// Interpolate model surfels trilinearly in the Newton stage (§4.3).
+    pub interpolate: bool,
+    /// Interpolate model surfels in the LM stage as well. The original does not; without
+    /// it, surfel means anchored to the two maps' grids pull the estimate towards poses
+    /// that align the grids (measured: 2× the error at 17 mm steps on rendered scenes).
+    pub interpolate_lm: bool,
+    /// Fewer associations than this means the maps do not overlap: failure.
+    pub min_associations: usize,
+    /// The registration fails when less than this fraction of the scene's usable nodes
+    /// is associated at the end: the views do not show the same surfaces (measured on
+    /// TUM frame pairs: ≥ 0.83; on a view of an unrelated surface: 0.30).
+    pub min_overlap: f64,
+    /// A pose whose standard deviation (Eq. 6) along some direction exceeds this (m) is
+    /// not constrained by the data (a plain wall, a corridor): failure.
+    pub max_translation_std_m: f64,
+    /// Likewise for rotation (rad).
+    pub max_rotation_std_rad: f64,
+}
+
+impl Default for RegistrationParams {
+    fn default() -> Self {
+        RegistrationParams {
+            finest_level: 0,
+            coarsest_level: 5,
+            lm_max_iterations: 100,
+            newton_iterations: 5,
+            search_radius_cells: 2.0,
+            view_dir_min_cos: 0.5,
+            use_color: true,
+            luminance_gate: 0.5,
+            chroma_gate: 0.1,
+            use_descriptors: true,
+            descriptor_gate: 0.1,
+            match_contours: true,
+            covariance_regularization: 0.001,
+            lm_tau: 1e-4,
+            step_tolerance_m: 5e-4,
+            step_tolerance_rad: 5e-4,
+            interpolate: true,
+            interpolate_lm: true,
+            min_associations: 30,
+            min_overlap: 0.5,
+            max_translation_std_m: 0.01,
+            max_rotation_std_rad: 0.02,
+        }
+    }
+}
+
+impl RegistrationParams {
+    /// Checks ranges; the error names the first bad parameter.
+    pub fn validate(&self, num_levels: usize) -> Result<(), RegistrationParamsError> {
+        let err = |name, value: f64, expected| Err(RegistrationParamsError { name, value, expected });
+        if self.coarsest_level >= num_levels {
+            return err("coarsest_level", self.coarsest_level as f64, "< the map's number of levels");
+        }
+        if self.finest_level > self.coarsest_level {
+            return err("finest_level", self.finest_level as f64, "<= coarsest_level");
+        }
+        if !(self.search_radius_cells >= 0.5 && self.search_radius_cells <= 2.0) {
+            return err("search_radius_cells", self.search_radius_cells, "0.5 ..= 2");
+        }
+        if !(-1.0..=1.0).contains(&self.view_dir_min_cos) {
+            return err("view_dir_min_cos", self.view_dir_min_cos, "-1 ..= 1");
+        }
+        if !(self.covariance_regularization > 0.0 && self.covariance_regularization.is_finite()) {
+            return err("covariance_regularization", self.covariance_regularization, "> 0");
+        }
+        if !(self.lm_tau > 0.0 && self.lm_tau.is_finite()) {
+            return err("lm_tau", self.lm_tau, "> 0");
+        }
+        if self.lm_max_iterations + 2 * self.newton_iterations + 8 > super::workspace::MAX_PASSES {
+            return err("lm_max_iterations", self.lm_max_iterations as f64, "+ 2·newton_iterations <= 1000");
+        }
+        if !(0.0..=1.0).contains(&self.min_overlap) {
+            return err("min_overlap", self.min_overlap, "0 ..= 1");
+        }
+        if self.max_translation_std_m.is_nan() || self.max_translation_std_m <= 0.0 {
+            return err("max_translation_std_m", self.max_translation_std_m, "> 0");
+        }
+        if self.max_rotation_std_rad.is_nan() || self.max_rotation_std_rad <= 0.0 {
+            return err("max_rotation_std_rad", self.max_rotation_std_rad, "> 0");
+        }
+        if self.min_associations < 6 {
+            return err("min_associations", self.min_associations as f64, ">= 6");
+        }
+        Ok(())
+    }
+}

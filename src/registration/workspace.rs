@@ -1,0 +1,154 @@
+//! Preallocated state of one registration: per scene node association records and
+//! per-chunk partial sums. Created once per scene-map capacity and reused.
+
+use super::associate::DirCandidates;
+use crate::map::{MAX_LEVELS, NONE};
+use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
+
+/// Scene nodes per parallel work item (fixed, so sums do not depend on threads).
+pub(crate) const NODE_CHUNK: usize = 128;
+
+/// The association of one scene node.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Association {
+    /// This node or one of its children holds an association ("use the finest
+    /// available resolution", §4.1).
+    pub covered: bool,
+    /// Scene surfel, `NONE` if the node is not associated.
+    pub scene_surfel: u32,
+    /// Model node of the match; kept for bootstrapping the next search.
+    pub model_node: u32,
+    /// Model surfel of the match.
+    pub model_surfel: u32,
+    /// The association pass that last searched this node (index into the pass
+    /// history), for the exact cache below.
+    pub pass: u16,
+    /// That search was a cube query (else: the neighbourhood of the previous match).
+    pub cube: bool,
+    /// The search result stays valid while every transformed scene mean of the node
+    /// moves less than this (m) from where it was searched: half the gap between the
+    /// best match (or the search radius) and the nearest candidate that could overtake
+    /// it. Negative: not cached.
+    pub valid_radius: f32,
+}
+
+impl Association {
+    pub(crate) const NONE: Association = Association {
+        covered: false,
+        scene_surfel: NONE,
+        model_node: NONE,
+        model_surfel: NONE,
+        pass: 0,
+        cube: false,
+        valid_radius: -1.0,
+    };
+
+    #[inline]
+    pub(crate) fn is_matched(&self) -> bool {
+        self.scene_surfel != NONE
+    }
+
+    /// Whether both records pair the same surfels.
+    #[inline]
+    pub(crate) fn same_pair(&self, other: &Association) -> bool {
+        self.scene_surfel == other.scene_surfel
+            && self.model_surfel == other.model_surfel
+            && self.model_node == other.model_node
+    }
+}
+
+/// Sums of one chunk of associations: cost, gradient, Hessian.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Partial {
+    pub cost: f64,
+    pub gradient: Vector6<f64>,
+    pub hessian: Matrix6<f64>,
+    /// Terms summed.
+    pub count: u32,
+    /// `½ Σ e` of the previous associations at this pass's pose (the LM gain ratio).
+    pub previous_cost: f64,
+    /// Associations made (by an association pass).
+    pub matched: u32,
+}
+
+impl Partial {
+    pub(crate) const ZERO: Partial = Partial {
+        cost: 0.0,
+        gradient: Vector6::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+        hessian: Matrix6::new(
+            0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+        ),
+        count: 0,
+        previous_cost: 0.0,
+        matched: 0,
+    };
+
+    #[inline]
+    pub(crate) fn add_term(&mut self, cost: f64, gradient: &Vector6<f64>, hessian: &Matrix6<f64>) {
+        self.cost += cost;
+        self.gradient += gradient;
+        self.hessian += hessian;
+    }
+
+    pub(crate) fn add(&mut self, o: &Partial) {
+        self.cost += o.cost;
+        self.gradient += o.gradient;
+        self.hessian += o.hessian;
+        self.count += o.count;
+        self.previous_cost += o.previous_cost;
+        self.matched += o.matched;
+    }
+}
+
+/// The pose and view-direction candidates of one association pass.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct PassState {
+    pub rotation: Matrix3<f64>,
+    pub translation: Vector3<f64>,
+    pub dirs: DirCandidates,
+}
+
+/// Association passes one registration may make at most (LM + Newton + a few).
+pub(crate) const MAX_PASSES: usize = 1024;
+
+/// Scratch for registering against scene maps of up to `capacity` nodes.
+#[derive(Debug, Clone)]
+pub struct RegistrationWorkspace {
+    pub(crate) assoc: Vec<Association>,
+    /// The associations before the last pass, to restore when LM rejects its step.
+    pub(crate) assoc_backup: Vec<Association>,
+    pub(crate) partials: Vec<Partial>,
+    pub(crate) passes: Vec<PassState>,
+    capacity: usize,
+}
+
+impl RegistrationWorkspace {
+    /// Scratch for scene maps of up to `scene_node_capacity` nodes (the only allocation).
+    pub fn new(scene_node_capacity: usize) -> Self {
+        let chunks = scene_node_capacity.div_ceil(NODE_CHUNK) + MAX_LEVELS;
+        RegistrationWorkspace {
+            assoc: Vec::with_capacity(scene_node_capacity),
+            assoc_backup: Vec::with_capacity(scene_node_capacity),
+            partials: Vec::with_capacity(chunks),
+            passes: Vec::with_capacity(MAX_PASSES),
+            capacity: scene_node_capacity,
+        }
+    }
+
+    /// Largest scene map (in nodes) this workspace serves.
+    pub fn capacity(&self) -> usize {
+        self.capacity
+    }
+
+    pub(crate) fn reset(&mut self, scene_nodes: usize) {
+        self.assoc.clear();
+        self.assoc.resize(scene_nodes, Association::NONE);
+        self.assoc_backup.clear();
+        self.assoc_backup.resize(scene_nodes, Association::NONE);
+        let chunks = scene_nodes.div_ceil(NODE_CHUNK) + MAX_LEVELS;
+        self.partials.clear();
+        self.partials.resize(chunks, Partial::ZERO);
+        self.passes.clear();
+    }
+}

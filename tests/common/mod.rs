@@ -1,0 +1,97 @@
+//! Shared helpers for the integration tests: cameras, shipped data, rendering, maps.
+#![allow(dead_code)]
+
+use mrsmap::frame::RgbdFrame;
+use mrsmap::geometry::{CameraModel, PinholeIntrinsics, Pose};
+use mrsmap::map::{MapBuilder, MapCapacity, MapParams, SurfelMap};
+use mrsmap::synthetic::{Mesh, RenderTarget, render};
+use std::path::PathBuf;
+
+/// The repository root.
+pub fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// The shipped 8-frame TUM teddy clip.
+pub fn teddy_clip() -> PathBuf {
+    root().join("tests/data/fr3_teddy_8")
+}
+
+/// The TUM fr3 camera file.
+pub fn fr3_camera_file() -> PathBuf {
+    root().join("robot_config/cameras/tum_fr3.toml")
+}
+
+/// A VGA pinhole like the TUM fr3 camera.
+pub fn vga() -> CameraModel {
+    CameraModel {
+        width: 640,
+        height: 480,
+        intrinsics: PinholeIntrinsics { fx: 535.4, fy: 539.2, cx: 320.1, cy: 247.6 },
+        distortion: [0.0; 5],
+        depth_scale_m: 1.0 / 5000.0,
+    }
+}
+
+/// Renders `mesh` from `world_from_camera`.
+pub fn render_frame(mesh: &Mesh, camera: CameraModel, world_from_camera: &Pose) -> RenderTarget {
+    let mut t = RenderTarget::new(camera);
+    render(mesh, world_from_camera, &mut t, [0, 0, 0], 0.2);
+    t
+}
+
+/// Builds a map (odometry parameters) from a rendered frame.
+pub fn build_map(target: &RenderTarget) -> SurfelMap {
+    let cam = target.camera;
+    let capacity = MapCapacity::for_image((cam.width * cam.height) as usize);
+    let mut map = SurfelMap::new(MapParams::default(), capacity).expect("default parameters are valid");
+    let mut builder = MapBuilder::new(cam.width as usize, cam.height as usize, capacity.surfels);
+    let frame = RgbdFrame::new(0, cam, &target.rgb, &target.depth).expect("rendered frame is consistent");
+    builder.build(&frame, &mut map).expect("map builds");
+    map
+}
+
+/// Translation (m) and rotation (deg) between two poses.
+pub fn pose_error(a: &Pose, b: &Pose) -> (f64, f64) {
+    let d = a.inverse() * b;
+    (d.translation.vector.norm(), d.rotation.angle().to_degrees())
+}
+
+/// A fresh, empty temporary folder for one test.
+pub fn temp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("mrsmap-test-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    dir
+}
+
+/// Copies the shipped clip into a temporary folder (to damage it).
+pub fn copy_clip(name: &str) -> PathBuf {
+    let dst = temp_dir(name);
+    let src = teddy_clip();
+    for sub in ["rgb", "depth"] {
+        std::fs::create_dir_all(dst.join(sub)).expect("mkdir");
+        for e in std::fs::read_dir(src.join(sub)).expect("read clip") {
+            let e = e.expect("entry");
+            std::fs::copy(e.path(), dst.join(sub).join(e.file_name())).expect("copy");
+        }
+    }
+    for f in ["associations.txt", "groundtruth.txt"] {
+        std::fs::copy(src.join(f), dst.join(f)).expect("copy");
+    }
+    dst
+}
+
+/// An odometry job with default parameters.
+pub fn odometry_job(dataset: PathBuf, out: PathBuf, threads: usize) -> mrsmap::app::odometry::OdometryJob {
+    mrsmap::app::odometry::OdometryJob {
+        dataset,
+        camera: fr3_camera_file(),
+        out,
+        timings: None,
+        threads: Some(threads),
+        max_frames: None,
+        qvga: false,
+        params: Default::default(),
+    }
+}

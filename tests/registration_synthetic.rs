@@ -1,0 +1,105 @@
+//! Registration of rendered scenes with exactly known motion (seeded, repeatable).
+
+mod common;
+
+use common::*;
+use mrsmap::geometry::Pose;
+use mrsmap::geometry::se3::left_increment;
+use mrsmap::map::MapCapacity;
+use mrsmap::registration::{RegistrationError, RegistrationParams, RegistrationWorkspace, register};
+use mrsmap::synthetic::{Pcg32, room};
+use nalgebra::Vector6;
+
+/// A random camera motion of about `t_m` translation and `r_rad` rotation.
+fn random_motion(rng: &mut Pcg32, t_m: f64, r_rad: f64) -> Pose {
+    let mut d = Vector6::zeros();
+    for k in 0..3 {
+        d[k] = rng.uniform(-t_m, t_m);
+        d[3 + k] = rng.uniform(-r_rad, r_rad);
+    }
+    left_increment(&d)
+}
+
+fn register_pair(
+    motion: &Pose,
+    seed: u64,
+    camera: mrsmap::geometry::CameraModel,
+) -> Result<(f64, f64, usize), RegistrationError> {
+    let mesh = room(seed);
+    let a = render_frame(&mesh, camera, &Pose::identity());
+    let b = render_frame(&mesh, camera, motion);
+    let (model, scene) = (build_map(&a), build_map(&b));
+    let mut ws = RegistrationWorkspace::new(MapCapacity::for_image((camera.width * camera.height) as usize).nodes);
+    let r = register(&model, &scene, &Pose::identity(), &RegistrationParams::default(), &mut ws)?;
+    // The scene camera is at `motion` in the model camera's frame: model_from_scene = motion.
+    let (t, deg) = pose_error(&r.model_from_scene, motion);
+    Ok((t, deg, r.associations))
+}
+
+#[test]
+fn recovers_small_random_motions_at_vga() {
+    let mut rng = Pcg32::new(7);
+    for seed in 0..5 {
+        let motion = random_motion(&mut rng, 0.02, 0.02);
+        let (t, deg, n) = register_pair(&motion, seed, vga()).expect("registration succeeds");
+        println!("seed {seed}: error {:.3} mm {:.4} deg ({n} associations)", t * 1e3, deg);
+        assert!(t < 1.0e-3 && deg < 0.05, "seed {seed}: error {:.3} mm {:.4} deg", t * 1e3, deg);
+    }
+}
+
+#[test]
+fn recovers_larger_motions() {
+    let mut rng = Pcg32::new(11);
+    for seed in 0..3 {
+        let motion = random_motion(&mut rng, 0.05, 0.05);
+        let (t, deg, _) = register_pair(&motion, seed, vga()).expect("registration succeeds");
+        println!("seed {seed}: error {:.3} mm {:.4} deg", t * 1e3, deg);
+        assert!(t < 1.5e-3 && deg < 0.08, "seed {seed}: error {:.3} mm {:.4} deg", t * 1e3, deg);
+    }
+}
+
+#[test]
+fn recovers_motion_at_qvga() {
+    let mut rng = Pcg32::new(3);
+    for seed in 0..3 {
+        let motion = random_motion(&mut rng, 0.02, 0.02);
+        let (t, deg, _) = register_pair(&motion, seed, vga().halved()).expect("registration succeeds");
+        println!("seed {seed}: error {:.3} mm {:.4} deg", t * 1e3, deg);
+        assert!(t < 1.0e-3 && deg < 0.05, "seed {seed}: error {:.3} mm {:.4} deg", t * 1e3, deg);
+    }
+}
+
+#[test]
+fn views_that_do_not_overlap_fail() {
+    // The second camera is turned away from the scene by 120°: no common surface.
+    let motion = left_increment(&Vector6::new(0.0, 0.0, 0.0, 0.0, 2.1, 0.0));
+    let r = register_pair(&motion, 1, vga());
+    println!("{r:?}");
+    assert!(matches!(r, Err(RegistrationError::TooFewAssociations { .. })), "{r:?}");
+}
+
+#[test]
+fn a_plain_plane_does_not_constrain_the_pose() {
+    use mrsmap::synthetic::Mesh;
+    use mrsmap::synthetic::scene::{ColorField, add_quad};
+    use nalgebra::Vector3;
+    // A uniformly grey wall: sliding along it and turning about its normal are free.
+    let mut mesh = Mesh::default();
+    let grey = ColorField::new(&mut Pcg32::new(1), 0);
+    add_quad(
+        &mut mesh,
+        Vector3::new(-2.0, -2.0, 1.0),
+        Vector3::new(4.0, 0.0, 0.0),
+        Vector3::new(0.0, 4.0, 0.0),
+        0.02,
+        &grey,
+    );
+    let cam = vga();
+    let a = render_frame(&mesh, cam, &Pose::identity());
+    let b = render_frame(&mesh, cam, &left_increment(&Vector6::new(0.01, 0.0, 0.0, 0.0, 0.0, 0.0)));
+    let (model, scene) = (build_map(&a), build_map(&b));
+    let mut ws = RegistrationWorkspace::new(MapCapacity::for_image(640 * 480).nodes);
+    let r = register(&model, &scene, &Pose::identity(), &RegistrationParams::default(), &mut ws);
+    println!("{r:?}");
+    assert!(matches!(r, Err(RegistrationError::Degenerate { .. })), "{r:?}");
+}
