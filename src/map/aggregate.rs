@@ -238,10 +238,10 @@ impl Band {
         aggregate.border |= flags & FOREGROUND_BORDER != 0;
         let r = aggregate.reference;
         let rel = [x - r[0], y - r[1], z - r[2], l - r[3], a - r[4], b - r[5]];
-        for dir in 0..6 {
-            if dirs & (1 << dir) == 0 {
-                continue;
-            }
+        let mut remaining = dirs;
+        while remaining != 0 {
+            let dir = remaining.trailing_zeros() as usize;
+            remaining &= remaining - 1;
             let mut slot = aggregate.moments[dir];
             if slot == NONE {
                 if self.moments.len() >= self.moments_capacity {

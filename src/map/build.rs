@@ -3,7 +3,7 @@
 use super::aggregate::{AggregationInput, BAND_ROWS, Band};
 use super::border::mark_borders;
 use super::descriptor::{DESCRIPTOR_LEN, Descriptor, compute_descriptors};
-use super::evaluate::{CHUNK, RawMoments, estimate_normals, evaluate_statistics};
+use super::evaluate::{CHUNK, RawMoments, estimate_normals, evaluate_statistics, surfel_neighborhoods};
 use super::params::MAX_LEVELS;
 use super::stats::SurfelStats;
 use super::tree::{NONE, morton_code};
@@ -154,6 +154,7 @@ impl MapBuilder {
         self.insert_aggregates(map);
         merge_bottom_up(map);
         map.tree.establish_neighbors();
+        surfel_neighborhoods(map);
         // §3.1 evaluation, normals; §3.2 descriptors.
         let n = map.surfels.len();
         self.raw.clear();
@@ -261,7 +262,8 @@ impl MapBuilder {
                     continue;
                 }
                 node.surfels[dir] = map.surfels.len() as u32;
-                map.surfels.push(Surfel { node: i as u32, dir: dir as u8, ..Surfel::EMPTY });
+                map.surfels.push(Surfel { node: i as u32, dir: dir as u8, level: node.level, ..Surfel::EMPTY });
+                map.normals.push(nalgebra::Vector3::zeros());
                 map.stats.push(SurfelStats::EMPTY);
                 map.view_dirs.push([0.0; 3]);
             }

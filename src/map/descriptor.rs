@@ -13,7 +13,7 @@
 //! neighbours dominate quadratically); we use the normalised form described in the paper.
 
 use super::evaluate::CHUNK;
-use super::tree::{NONE, Node, SELF_NEIGHBOR};
+use super::tree::{NONE, SELF_NEIGHBOR};
 use super::{Surfel, SurfelMap};
 use nalgebra::Vector3;
 use rayon::prelude::*;
@@ -52,13 +52,20 @@ fn bin_texture(d: f32, theta: f32, w: f32, out: &mut [f32]) {
     out[1] += w * (1.0 - a);
 }
 
-fn add_pair(me: &Surfel, other: &Surfel, weight: f32, theta: f32, h: &mut Descriptor) {
+fn add_pair(
+    me: (&Surfel, &Vector3<f32>),
+    other: (&Surfel, &Vector3<f32>),
+    weight: f32,
+    theta: f32,
+    h: &mut Descriptor,
+) {
+    let ((me, n_me), (other, n_other)) = (me, other);
     let diff: Vector3<f32> = other.mean - me.mean;
     let len = diff.norm();
     let d = if len > 0.0 { diff / len } else { Vector3::zeros() };
-    bin_shape(me.normal.dot(&d), weight, &mut h[0..3]);
-    bin_shape(other.normal.dot(&d), weight, &mut h[3..6]);
-    bin_shape(me.normal.dot(&other.normal), weight, &mut h[6..9]);
+    bin_shape(n_me.dot(&d), weight, &mut h[0..3]);
+    bin_shape(n_other.dot(&d), weight, &mut h[3..6]);
+    bin_shape(n_me.dot(n_other), weight, &mut h[6..9]);
     let dc = other.color - me.color;
     bin_texture(dc.x, theta, weight, &mut h[9..12]);
     bin_texture(dc.y, theta, weight, &mut h[12..15]);
@@ -74,20 +81,11 @@ fn normalize_rows(h: &mut Descriptor) {
     }
 }
 
-/// The same-direction, usable surfels of a node's 26 neighbours.
+/// The valid surfels among a surfel's 26 same-direction neighbours.
 #[inline]
-fn neighbor_surfels<'a>(
-    nodes: &'a [Node],
-    surfels: &'a [Surfel],
-    neighbors: &'a [u32; 27],
-    dir: usize,
-) -> impl Iterator<Item = (u32, &'a Surfel)> + 'a {
-    neighbors.iter().enumerate().filter_map(move |(k, &nb)| {
-        if k == SELF_NEIGHBOR || nb == NONE {
-            return None;
-        }
-        let s = nodes[nb as usize].surfels[dir];
-        if s == NONE {
+fn neighbor_surfels<'a>(surfels: &'a [Surfel], row: &'a [u32; 27]) -> impl Iterator<Item = (u32, &'a Surfel)> + 'a {
+    row.iter().enumerate().filter_map(move |(k, &s)| {
+        if k == SELF_NEIGHBOR || s == NONE {
             return None;
         }
         let sf = &surfels[s as usize];
@@ -99,19 +97,21 @@ fn neighbor_surfels<'a>(
 pub(crate) fn compute_descriptors(map: &mut SurfelMap, simple: &mut [Descriptor]) {
     let theta = map.params.texture_bin_threshold;
     let weight = map.params.descriptor_neighbor_weight;
-    let nodes = &map.tree.nodes;
-    let neighbors = &map.tree.neighbors;
+    let rows = &map.surfel_neighbors;
     let surfels = &map.surfels;
+    let normals = &map.normals;
     simple.par_chunks_mut(CHUNK).enumerate().for_each(|(c, out)| {
         for (k, h) in out.iter_mut().enumerate() {
-            let me = &surfels[c * CHUNK + k];
+            let idx = c * CHUNK + k;
+            let me = &surfels[idx];
             *h = [0.0; DESCRIPTOR_LEN];
             if !me.valid {
                 continue;
             }
-            add_pair(me, me, me.count, theta, h);
-            for (_, other) in neighbor_surfels(nodes, surfels, &neighbors[me.node as usize], me.dir as usize) {
-                add_pair(me, other, other.count, theta, h);
+            let mine = (me, &normals[idx]);
+            add_pair(mine, mine, me.count, theta, h);
+            for (s, other) in neighbor_surfels(surfels, &rows[idx]) {
+                add_pair(mine, (other, &normals[s as usize]), other.count, theta, h);
             }
             normalize_rows(h);
         }
@@ -125,7 +125,7 @@ pub(crate) fn compute_descriptors(map: &mut SurfelMap, simple: &mut [Descriptor]
             if !me.valid {
                 continue;
             }
-            for (s, _) in neighbor_surfels(nodes, surfels, &neighbors[me.node as usize], me.dir as usize) {
+            for (s, _) in neighbor_surfels(surfels, &rows[idx]) {
                 for (a, b) in h.iter_mut().zip(&simple[s as usize]) {
                     *a += weight * b;
                 }

@@ -10,6 +10,22 @@ use crate::geometry::eigen3::smallest_eigen;
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 
+/// Fills the same-direction surfel neighbourhoods from the node neighbourhoods.
+pub(crate) fn surfel_neighborhoods(map: &mut SurfelMap) {
+    let n = map.surfels.len();
+    map.surfel_neighbors.clear();
+    map.surfel_neighbors.resize(n, [NONE; 27]);
+    let (nodes, neighbors, surfels) = (&map.tree.nodes, &map.tree.neighbors, &map.surfels);
+    map.surfel_neighbors.par_chunks_mut(CHUNK).enumerate().for_each(|(c, out)| {
+        for (k, row) in out.iter_mut().enumerate() {
+            let s = &surfels[c * CHUNK + k];
+            for (slot, &nb) in row.iter_mut().zip(&neighbors[s.node as usize]) {
+                *slot = if nb == NONE { NONE } else { nodes[nb as usize].surfels[s.dir as usize] };
+            }
+        }
+    });
+}
+
 /// Surfels per parallel work item (fixed, so that work splits do not depend on threads).
 pub(crate) const CHUNK: usize = 256;
 
@@ -97,7 +113,7 @@ fn evaluate_one(params: &MapParams, node: &Node, st: &SurfelStats, s: &mut Surfe
     s.mean = Vector3::new(mean[0] as f32, mean[1] as f32, mean[2] as f32);
     s.color = Vector3::new(mean[3] as f32, mean[4] as f32, mean[5] as f32);
     let cov = st.position_covariance();
-    s.cov = cov.cast::<f32>();
+    s.set_cov(&cov);
     s.valid = covariance_is_proper(&cov);
     s.usable = s.valid && !s.excluded;
 }
@@ -107,39 +123,37 @@ fn evaluate_one(params: &MapParams, node: &Node, st: &SurfelStats, s: &mut Surfe
 /// turned towards the sensor. A surfel without a unique normal becomes invalid.
 pub(crate) fn estimate_normals(map: &mut SurfelMap, raw: &[RawMoments]) {
     let smooth = map.params.smooth_normals;
-    let nodes = &map.tree.nodes;
-    let neighbors = &map.tree.neighbors;
+    let surfel_neighbors = &map.surfel_neighbors;
     let view_dirs = &map.view_dirs;
-    map.surfels.par_chunks_mut(CHUNK).enumerate().for_each(|(c, surfels)| {
-        for (k, s) in surfels.iter_mut().enumerate() {
-            if !s.valid {
-                continue;
-            }
-            let idx = c * CHUNK + k;
-            let cov: Matrix3<f64> = if smooth {
-                let mut sum = RawMoments::default();
-                for &nb in neighbors[s.node as usize].iter().filter(|&&n| n != NONE) {
-                    let ns = nodes[nb as usize].surfels[s.dir as usize];
-                    if ns != NONE {
+    map.surfels.par_chunks_mut(CHUNK).zip(map.normals.par_chunks_mut(CHUNK)).enumerate().for_each(
+        |(c, (surfels, normals))| {
+            for (k, (s, normal)) in surfels.iter_mut().zip(normals.iter_mut()).enumerate() {
+                if !s.valid {
+                    continue;
+                }
+                let idx = c * CHUNK + k;
+                let cov: Matrix3<f64> = if smooth {
+                    let mut sum = RawMoments::default();
+                    for &ns in surfel_neighbors[c * CHUNK + k].iter().filter(|&&n| n != NONE) {
                         sum.add(&raw[ns as usize]);
                     }
-                }
-                sum.covariance()
-            } else {
-                s.cov.cast::<f64>()
-            };
-            match smallest_eigen(&cov).vector {
-                Some(n) => {
-                    let v = view_dirs[idx];
-                    let n = n.cast::<f32>();
-                    let facing = n.x * v[0] + n.y * v[1] + n.z * v[2];
-                    s.normal = if facing > 0.0 { -n } else { n };
-                }
-                None => {
-                    s.valid = false;
-                    s.usable = false;
+                    sum.covariance()
+                } else {
+                    s.cov()
+                };
+                match smallest_eigen(&cov).vector {
+                    Some(n) => {
+                        let v = view_dirs[idx];
+                        let n = n.cast::<f32>();
+                        let facing = n.x * v[0] + n.y * v[1] + n.z * v[2];
+                        *normal = if facing > 0.0 { -n } else { n };
+                    }
+                    None => {
+                        s.valid = false;
+                        s.usable = false;
+                    }
                 }
             }
-        }
-    });
+        },
+    );
 }

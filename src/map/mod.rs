@@ -26,54 +26,64 @@ pub use tree::{NONE, Node, NodeArena, SELF_NEIGHBOR, neighbor_index};
 
 use nalgebra::{Matrix3, Vector3};
 
-/// An evaluated surfel: what registration reads (compact, single precision; the
-/// double-precision statistics stay in [`SurfelMap::stats`]).
-///
-/// The layout is fixed so that what association tests — mean, colour, flags — shares
-/// the first cache line.
+/// An evaluated surfel: what registration reads, in exactly one 64-byte cache line
+/// (single precision; the double-precision statistics stay in [`SurfelMap::stats`],
+/// normals in [`SurfelMap::normals`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
-#[repr(C)]
+#[repr(C, align(64))]
 pub struct Surfel {
     /// Mean position (m, map frame).
     pub mean: Vector3<f32>,
+    /// Unbiased covariance of the position (m²), packed `xx, xy, xz, yy, yz, zz`.
+    pub cov_packed: [f32; 6],
     /// Mean colour `[L, α, β]`.
     pub color: Vector3<f32>,
+    /// Number of points.
+    pub count: f32,
+    /// Node that holds the surfel.
+    pub node: u32,
     /// View-direction index (0 +x, 1 −x, 2 +y, 3 −y, 4 +z, 5 −z).
     pub dir: u8,
+    /// Resolution level of the node.
+    pub level: u8,
     /// At least `min_points` points, a proper covariance and a normal.
     pub valid: bool,
     /// Touched a virtual or image border (§3.4): kept out of registration.
     pub excluded: bool,
     /// `valid && !excluded`: may take part in registration.
     pub usable: bool,
-    /// Number of points.
-    pub count: f32,
-    /// Node that holds the surfel.
-    pub node: u32,
-    /// Unbiased covariance of the position (m²).
-    pub cov: Matrix3<f32>,
-    /// Unit normal, pointing towards the sensor that first saw the surfel.
-    pub normal: Vector3<f32>,
 }
 
 impl Surfel {
     const EMPTY: Surfel = Surfel {
         mean: Vector3::new(0.0, 0.0, 0.0),
+        cov_packed: [0.0; 6],
         color: Vector3::new(0.0, 0.0, 0.0),
+        count: 0.0,
+        node: NONE,
         dir: 0,
+        level: 0,
         valid: false,
         excluded: false,
         usable: false,
-        count: 0.0,
-        node: NONE,
-        cov: Matrix3::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
-        normal: Vector3::new(0.0, 0.0, 0.0),
     };
 
     /// Valid and not excluded: may take part in registration.
     #[inline]
     pub fn usable(&self) -> bool {
         self.usable
+    }
+
+    /// The position covariance as a matrix.
+    #[inline]
+    pub fn cov(&self) -> Matrix3<f64> {
+        let [xx, xy, xz, yy, yz, zz] = self.cov_packed.map(|v| v as f64);
+        Matrix3::new(xx, xy, xz, xy, yy, yz, xz, yz, zz)
+    }
+
+    /// Stores a symmetric covariance.
+    pub fn set_cov(&mut self, c: &Matrix3<f64>) {
+        self.cov_packed = [c[(0, 0)], c[(0, 1)], c[(0, 2)], c[(1, 1)], c[(1, 2)], c[(2, 2)]].map(|v| v as f32);
     }
 }
 
@@ -84,9 +94,14 @@ pub struct SurfelMap {
     pub(crate) tree: NodeArena,
     pub(crate) stats: Vec<SurfelStats>,
     pub(crate) surfels: Vec<Surfel>,
+    /// Unit normals, parallel to `surfels`, towards the sensor that first saw each surfel.
+    pub(crate) normals: Vec<Vector3<f32>>,
     /// Unit direction from the sensor to the first point of each surfel.
     pub(crate) view_dirs: Vec<[f32; 3]>,
     pub(crate) descriptors: Vec<Descriptor>,
+    /// Per surfel, the surfels of the same view direction in its node's 27-neighbourhood
+    /// (index [`SELF_NEIGHBOR`] is the surfel itself), `NONE` where absent.
+    pub(crate) surfel_neighbors: Vec<[u32; 27]>,
     surfel_capacity: usize,
 }
 
@@ -99,8 +114,10 @@ impl SurfelMap {
             tree: NodeArena::with_capacity(capacity.nodes, params.num_levels),
             stats: Vec::with_capacity(capacity.surfels),
             surfels: Vec::with_capacity(capacity.surfels),
+            normals: Vec::with_capacity(capacity.surfels),
             view_dirs: Vec::with_capacity(capacity.surfels),
             descriptors: Vec::with_capacity(capacity.surfels),
+            surfel_neighbors: Vec::with_capacity(capacity.surfels),
             surfel_capacity: capacity.surfels,
         })
     }
@@ -110,8 +127,10 @@ impl SurfelMap {
         self.tree.clear(self.params.num_levels);
         self.stats.clear();
         self.surfels.clear();
+        self.normals.clear();
         self.view_dirs.clear();
         self.descriptors.clear();
+        self.surfel_neighbors.clear();
     }
 
     /// The parameters the map was built with.
@@ -147,6 +166,17 @@ impl SurfelMap {
     /// All evaluated surfels.
     pub fn surfels(&self) -> &[Surfel] {
         &self.surfels
+    }
+
+    /// The unit normals, parallel to [`Self::surfels`].
+    pub fn normals(&self) -> &[Vector3<f32>] {
+        &self.normals
+    }
+
+    /// The same-direction surfels of a surfel's node neighbourhood (27 entries, index
+    /// [`SELF_NEIGHBOR`] is the surfel itself, `NONE` where absent).
+    pub fn surfel_neighbors(&self, surfel: u32) -> &[u32; 27] {
+        &self.surfel_neighbors[surfel as usize]
     }
 
     /// The shape–texture descriptors, parallel to [`Self::surfels`].
@@ -194,8 +224,19 @@ impl SurfelMap {
     pub fn usable_surfels_per_level(&self) -> [usize; MAX_LEVELS] {
         let mut out = [0; MAX_LEVELS];
         for s in self.surfels.iter().filter(|s| s.usable()) {
-            out[self.tree.nodes[s.node as usize].level as usize] += 1;
+            out[s.level as usize] += 1;
         }
         out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn surfel_is_one_cache_line() {
+        assert_eq!(std::mem::size_of::<Surfel>(), 64);
+        assert_eq!(std::mem::align_of::<Surfel>(), 64);
     }
 }

@@ -159,18 +159,17 @@ fn associate_node(
         *a = Association { covered: true, ..Association::NONE };
         return;
     }
-    let mut transformed: [Transformed; 6] = [(NONE, Vector3::zeros(), Vector3::zeros()); 6];
-    let mut n = 0;
+    // At most one surfel per view direction: six fit, without initialising the storage.
+    let mut transformed: heapless::Vec<Transformed, 6> = heapless::Vec::new();
     for &s in node.surfels.iter().filter(|&&s| s != NONE) {
         let sf = &scene.surfels()[s as usize];
         if sf.usable() {
             let mean = sf.mean.cast::<f64>();
-            transformed[n] = (s, mean, terms.rotation * mean + terms.translation);
-            n += 1;
+            let _ = transformed.push((s, mean, terms.rotation * mean + terms.translation));
         }
     }
-    let transformed = &transformed[..n];
-    if n == 0 {
+    let transformed = &transformed[..];
+    if transformed.is_empty() {
         *a = Association::NONE;
         return;
     }

@@ -84,13 +84,28 @@ pub(crate) fn lm_term(t: &TermInput) -> Option<(f64, Vector6<f64>, Matrix6<f64>)
     Some((e, g, h))
 }
 
-const GENERATORS: [Matrix3<f64>; 3] = [
-    Matrix3::new(0.0, 0.0, 0.0, 0.0, 0.0, -1.0, 0.0, 1.0, 0.0),
-    Matrix3::new(0.0, 0.0, 1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0),
-    Matrix3::new(0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0),
-];
+/// `G_k M` for the generator `G_k = [e_k]×`: row `i` of the result is
+/// `(e_k × column)_i`, i.e. a permutation of two rows of `M` with one sign flip.
+#[inline]
+fn gen_mul(k: usize, m: &Matrix3<f64>) -> Matrix3<f64> {
+    let (a, b) = ((k + 1) % 3, (k + 2) % 3);
+    let mut out = Matrix3::zeros();
+    // (G_k)_{a,b} = −1, (G_k)_{b,a} = +1.
+    out.set_row(a, &(-m.row(b)));
+    out.set_row(b, &m.row(a));
+    out
+}
+
+/// `G_k v`.
+#[inline]
+fn gen_vec(k: usize, v: &Vector3<f64>) -> Vector3<f64> {
+    Vector3::ith(k, 1.0).cross(v)
+}
 
 /// Newton stage: `(e, ∇e, ∇²e)` of `e = log det Σ + dᵀΣ⁻¹d` (Eq. 4).
+///
+/// Uses the structure of the rotation generators: `G_k C` permutes rows, `C G_k =
+/// −(G_k C)ᵀ` for symmetric `C`, and `G_k G_l = e_l e_kᵀ − δ_kl I`.
 pub(crate) fn likelihood_term(t: &TermInput) -> Option<(f64, Vector6<f64>, Matrix6<f64>)> {
     let sigma = t.model_cov + t.c;
     let det = sigma.determinant();
@@ -101,18 +116,16 @@ pub(crate) fn likelihood_term(t: &TermInput) -> Option<(f64, Vector6<f64>, Matri
     let d = t.model_mean - t.p;
     let u = s * d;
     let e = det.ln() + d.dot(&u);
-    // First derivatives of p and Σ per parameter (Σ's vanish for translations).
-    let mut dp = [Vector3::zeros(); 6];
-    let mut ds = [Matrix3::zeros(); 3];
-    for k in 0..3 {
-        dp[k] = t.a.column(k).into_owned();
-        let g = &GENERATORS[k];
-        dp[3 + k] = t.a * (g * t.p);
-        ds[k] = g * t.c - t.c * g;
-    }
+    // First derivatives of p (through A) and of Σ (rotations only).
+    let gc: [Matrix3<f64>; 3] = std::array::from_fn(|k| gen_mul(k, &t.c));
+    let ds: [Matrix3<f64>; 3] = std::array::from_fn(|k| gc[k] + gc[k].transpose());
+    let gp: [Vector3<f64>; 3] = std::array::from_fn(|k| gen_vec(k, &t.p));
+    let dp: [Vector3<f64>; 6] =
+        std::array::from_fn(|i| if i < 3 { t.a.column(i).into_owned() } else { t.a * gp[i - 3] });
     let s_ds: [Matrix3<f64>; 3] = std::array::from_fn(|k| s * ds[k]);
     let ds_u: [Vector3<f64>; 3] = std::array::from_fn(|k| ds[k] * u);
     let s_dp: [Vector3<f64>; 6] = std::array::from_fn(|i| s * dp[i]);
+    let s_ds_u: [Vector3<f64>; 3] = std::array::from_fn(|k| s * ds_u[k]);
     let mut grad = Vector6::zeros();
     for i in 0..6 {
         grad[i] = -2.0 * dp[i].dot(&u);
@@ -129,15 +142,27 @@ pub(crate) fn likelihood_term(t: &TermInput) -> Option<(f64, Vector6<f64>, Matri
             }
             if i >= 3 {
                 let (k, l) = (i - 3, j - 3);
-                let (gk, gl) = (&GENERATORS[k], &GENERATORS[l]);
-                let q = gk * gl + gl * gk;
-                let dp_ij = 0.5 * t.a * (q * t.p);
-                let ds_ij = 0.5 * (q * t.c + t.c * q) - gk * t.c * gl - gl * t.c * gk;
-                v += 2.0 * s_dp[j].dot(&ds_u[k]) + (s * ds_ij).trace()
-                    - 2.0 * dp_ij.dot(&u)
-                    - u.dot(&(ds_ij * u))
+                // Q = G_kG_l + G_lG_k = e_l e_kᵀ + e_k e_lᵀ − 2δ_kl I.
+                // ½ Q p and ½(QC + CQ), then Σ_kl = ½(QC + CQ) − G_kCG_l − G_lCG_k.
+                let delta = if k == l { 1.0 } else { 0.0 };
+                let mut half_qp = -delta * t.p;
+                half_qp[l] += 0.5 * t.p[k];
+                half_qp[k] += 0.5 * t.p[l];
+                let mut qc = -2.0 * delta * t.c;
+                for col in 0..3 {
+                    qc[(l, col)] += t.c[(k, col)];
+                    qc[(k, col)] += t.c[(l, col)];
+                }
+                // G_k C G_l = (G_k C) G_l = −(G_l (G_k C)ᵀ)ᵀ.
+                let gcg_kl = -gen_mul(l, &gc[k].transpose()).transpose();
+                let gcg_lk = -gen_mul(k, &gc[l].transpose()).transpose();
+                let ds_kl = 0.5 * (qc + qc.transpose()) - gcg_kl - gcg_lk;
+                let dp_kl = t.a * half_qp;
+                v += 2.0 * s_dp[j].dot(&ds_u[k]) + (s * ds_kl).trace()
+                    - 2.0 * dp_kl.dot(&u)
+                    - u.dot(&(ds_kl * u))
                     - (s_ds[l] * s_ds[k]).trace()
-                    + 2.0 * ds_u[l].dot(&(s * ds_u[k]));
+                    + 2.0 * ds_u[l].dot(&s_ds_u[k]);
             }
             hess[(i, j)] = v;
             hess[(j, i)] = v;

@@ -64,13 +64,13 @@ impl<'a> SumInput<'a> {
     pub(crate) fn term(&self, a: &Association) -> TermInput {
         let ss = &self.scene.surfels()[a.scene_surfel as usize];
         let ms = &self.model.surfels()[a.model_surfel as usize];
-        let level = self.scene.nodes()[ss.node as usize].level as usize;
+        let level = ss.level as usize;
         let reg = Matrix3::identity() * self.regularization[level];
         let r = &self.rotation;
         let p = r * ss.mean.cast::<f64>() + self.translation;
-        let c = r * ss.cov.cast::<f64>() * r.transpose() + reg;
+        let c = r * ss.cov() * r.transpose() + reg;
         let m = if self.interpolate {
-            interpolate(self.model, a.model_node, ms.dir, &p, self.model.resolution(level))
+            interpolate(self.model, a.model_node, a.model_surfel, &p, self.model.resolution(level))
         } else {
             Interpolated::of(ms)
         };
@@ -104,7 +104,7 @@ pub(crate) struct Interpolated {
 
 impl Interpolated {
     fn of(s: &Surfel) -> Self {
-        Interpolated { mean: s.mean.cast::<f64>(), cov: s.cov.cast::<f64>(), jacobian: Matrix3::zeros() }
+        Interpolated { mean: s.mean.cast::<f64>(), cov: s.cov(), jacobian: Matrix3::zeros() }
     }
 }
 
@@ -115,27 +115,22 @@ impl Interpolated {
 /// blended with weights `wᵢ = Π (1 − |cᵢ − pᵢ| / res)`; otherwise, or if no such cell
 /// holds a usable surfel, the matched surfel itself is returned. The Jacobian of the
 /// blended mean is `Σ (μᵢ − μ) ∇wᵢᵀ / Σ wᵢ`.
-pub(crate) fn interpolate(model: &SurfelMap, node: u32, dir: u8, p: &Vector3<f64>, res: f64) -> Interpolated {
-    let nodes = model.nodes();
+pub(crate) fn interpolate(model: &SurfelMap, node: u32, surfel: u32, p: &Vector3<f64>, res: f64) -> Interpolated {
     let surfels = model.surfels();
-    let matched = || Interpolated::of(&surfels[nodes[node as usize].surfels[dir as usize] as usize]);
-    let off = (p - model.node_center(&nodes[node as usize])) / res;
+    let matched = || Interpolated::of(&surfels[surfel as usize]);
+    let off = (p - model.node_center(&model.nodes()[node as usize])) / res;
     if off.amax() > 1.0 {
         return matched();
     }
     let step = off.map(|o| if o >= 0.0 { 1 } else { -1 });
-    let neighbors = model.neighbors(node);
+    let row = model.surfel_neighbors(surfel);
     let (mut sw, mut mean, mut cov) = (0.0, Vector3::zeros(), Matrix3::zeros());
     let mut cells: [(f64, Vector3<f64>, Vector3<f64>); 8] = [(0.0, Vector3::zeros(), Vector3::zeros()); 8];
     let mut n = 0;
     for dx in [0, step.x] {
         for dy in [0, step.y] {
             for dz in [0, step.z] {
-                let nb = neighbors[neighbor_index(dx, dy, dz)];
-                if nb == NONE {
-                    continue;
-                }
-                let s = nodes[nb as usize].surfels[dir as usize];
+                let s = row[neighbor_index(dx, dy, dz)];
                 if s == NONE || !surfels[s as usize].usable() {
                     continue;
                 }
@@ -147,7 +142,7 @@ pub(crate) fn interpolate(model: &SurfelMap, node: u32, dir: u8, p: &Vector3<f64
                     let mu = sf.mean.cast::<f64>();
                     sw += w;
                     mean += mu * w;
-                    cov += sf.cov.cast::<f64>() * w;
+                    cov += sf.cov() * w;
                     // ∂w/∂p: each factor 1 − |r| falls by sign(r)/res along its axis.
                     let grad =
                         Vector3::new(-r.x.signum() * f.y * f.z, -r.y.signum() * f.x * f.z, -r.z.signum() * f.x * f.y)
