@@ -108,6 +108,9 @@ struct BenchArgs {
     /// Worker threads [default: all cores].
     #[arg(long)]
     threads: Option<usize>,
+    /// Image sizes to run.
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "vga,qvga")]
+    resolution: Vec<app::bench::Resolution>,
 }
 
 fn print_stats(title: &str, s: &ErrorStats) {
@@ -156,6 +159,7 @@ fn main() -> Result<()> {
                 frames: a.frames,
                 passes: a.passes,
                 threads: a.threads,
+                resolutions: a.resolution,
             };
             let results = app::bench::run(&job)?;
             let threads = a.threads.unwrap_or_else(rayon::current_num_threads);

@@ -28,6 +28,17 @@ pub struct BenchJob {
     pub passes: usize,
     /// Worker threads (default: all cores).
     pub threads: Option<usize>,
+    /// Run at VGA (full size) and/or QVGA (halved).
+    pub resolutions: Vec<Resolution>,
+}
+
+/// An image size to benchmark.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Resolution {
+    /// The dataset's own size (640×480 for TUM).
+    Vga,
+    /// Halved on load (320×240).
+    Qvga,
 }
 
 /// Timings of one resolution (ms per frame).
@@ -109,7 +120,7 @@ fn run_one(
     Ok(r)
 }
 
-/// Runs the benchmark at VGA and at QVGA.
+/// Runs the benchmark at each requested resolution.
 pub fn run(job: &BenchJob) -> Result<Vec<BenchResult>> {
     if job.frames < 2 {
         bail!("--frames must be at least 2");
@@ -122,7 +133,11 @@ pub fn run(job: &BenchJob) -> Result<Vec<BenchResult>> {
     }
     let pool = pool.build()?;
     let mut out = Vec::new();
-    for (label, half) in [("VGA", false), ("QVGA", true)] {
+    for &res in &job.resolutions {
+        let (label, half) = match res {
+            Resolution::Vga => ("VGA", false),
+            Resolution::Qvga => ("QVGA", true),
+        };
         let (cam, frames) = decode(&dataset, camera, half, job.frames)?;
         out.push(run_one(job, label, cam, &frames, &pool)?);
     }
