@@ -128,29 +128,31 @@ impl PngReader {
     }
 }
 
-/// Writes an 8-bit RGB image as PNG (for pictures of maps and plots).
-pub fn write_rgb8(path: &Path, width: u32, height: u32, rgb: &[u8]) -> Result<(), ImageError> {
-    let io_err = |source| ImageError::Io { path: path.to_path_buf(), source };
-    let file = std::fs::File::create(path).map_err(io_err)?;
+fn write_png(
+    path: &Path,
+    width: u32,
+    height: u32,
+    color: png::ColorType,
+    depth: png::BitDepth,
+    bytes: &[u8],
+) -> Result<(), ImageError> {
+    let file = std::fs::File::create(path).map_err(|source| ImageError::Io { path: path.to_path_buf(), source })?;
     let mut encoder = png::Encoder::new(std::io::BufWriter::new(file), width, height);
-    encoder.set_color(png::ColorType::Rgb);
-    encoder.set_depth(png::BitDepth::Eight);
+    encoder.set_color(color);
+    encoder.set_depth(depth);
     let enc_err = |e: png::EncodingError| ImageError::Decode { path: path.to_path_buf(), message: e.to_string() };
     let mut writer = encoder.write_header().map_err(enc_err)?;
-    writer.write_image_data(rgb).map_err(enc_err)?;
+    writer.write_image_data(bytes).map_err(enc_err)?;
     writer.finish().map_err(enc_err)
 }
 
-/// Writes a 16-bit greyscale depth image as PNG.
+/// Writes an 8-bit RGB image as PNG (for pictures of maps and plots).
+pub fn write_rgb8(path: &Path, width: u32, height: u32, rgb: &[u8]) -> Result<(), ImageError> {
+    write_png(path, width, height, png::ColorType::Rgb, png::BitDepth::Eight, rgb)
+}
+
+/// Writes a 16-bit greyscale depth image as PNG (big-endian samples, as PNG stores them).
 pub fn write_depth16(path: &Path, width: u32, height: u32, depth: &[u16]) -> Result<(), ImageError> {
-    let io_err = |source| ImageError::Io { path: path.to_path_buf(), source };
-    let file = std::fs::File::create(path).map_err(io_err)?;
-    let mut encoder = png::Encoder::new(std::io::BufWriter::new(file), width, height);
-    encoder.set_color(png::ColorType::Grayscale);
-    encoder.set_depth(png::BitDepth::Sixteen);
-    let enc_err = |e: png::EncodingError| ImageError::Decode { path: path.to_path_buf(), message: e.to_string() };
-    let mut writer = encoder.write_header().map_err(enc_err)?;
     let bytes: Vec<u8> = depth.iter().flat_map(|d| d.to_be_bytes()).collect();
-    writer.write_image_data(&bytes).map_err(enc_err)?;
-    writer.finish().map_err(enc_err)
+    write_png(path, width, height, png::ColorType::Grayscale, png::BitDepth::Sixteen, &bytes)
 }

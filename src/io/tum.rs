@@ -67,6 +67,20 @@ fn fields(line: &str) -> Vec<&str> {
     line.split([' ', '\t', ',']).filter(|f| !f.is_empty()).collect()
 }
 
+/// The data lines of a TUM text file: `(1-based line number, fields)`, skipping blank
+/// lines and `#` comments.
+fn data_lines(text: &str) -> impl Iterator<Item = (usize, Vec<&str>)> {
+    text.lines().enumerate().filter_map(|(i, line)| {
+        let line = line.trim();
+        (!line.is_empty() && !line.starts_with('#')).then(|| (i + 1, fields(line)))
+    })
+}
+
+/// A parse error at `line` of `path`.
+fn parse_error(path: &Path, line: usize) -> impl Fn(String) -> TumError + '_ {
+    move |message| TumError::Parse { path: path.to_path_buf(), line, message }
+}
+
 fn read_text(path: &Path) -> Result<String, TumError> {
     std::fs::read_to_string(path).map_err(|source| TumError::Io { path: path.to_path_buf(), source })
 }
@@ -84,15 +98,10 @@ pub struct StampedFile {
 pub fn read_file_list(path: &Path) -> Result<Vec<StampedFile>, TumError> {
     let text = read_text(path)?;
     let mut out = Vec::new();
-    for (i, line) in text.lines().enumerate() {
-        let line = line.trim();
-        if line.is_empty() || line.starts_with('#') {
-            continue;
-        }
-        let f = fields(line);
-        let parse_err = |message: String| TumError::Parse { path: path.to_path_buf(), line: i + 1, message };
+    for (line, f) in data_lines(&text) {
+        let parse_err = parse_error(path, line);
         if f.len() < 2 {
-            return Err(parse_err(format!("expected `timestamp filename`, found {line:?}")));
+            return Err(parse_err(format!("expected `timestamp filename`, found {}", f.join(" "))));
         }
         let stamp_ns = parse_stamp_ns(f[0]).ok_or_else(|| parse_err(format!("bad timestamp {:?}", f[0])))?;
         out.push(StampedFile { stamp_ns, file: f[1].to_string() });
@@ -178,13 +187,8 @@ impl TumDataset {
 fn read_associations(root: &Path, path: &Path) -> Result<Vec<DatasetFrame>, TumError> {
     let text = read_text(path)?;
     let mut frames = Vec::new();
-    for (i, line) in text.lines().enumerate() {
-        let line = line.trim();
-        if line.is_empty() || line.starts_with('#') {
-            continue;
-        }
-        let f = fields(line);
-        let parse_err = |message: String| TumError::Parse { path: path.to_path_buf(), line: i + 1, message };
+    for (line, f) in data_lines(&text) {
+        let parse_err = parse_error(path, line);
         if f.len() != 4 {
             return Err(parse_err(format!("expected 4 fields `stamp file stamp file`, found {}", f.len())));
         }
@@ -232,13 +236,8 @@ impl Trajectory {
     pub fn read(path: &Path) -> Result<Self, TumError> {
         let text = read_text(path)?;
         let mut t = Trajectory::default();
-        for (i, line) in text.lines().enumerate() {
-            let line = line.trim();
-            if line.is_empty() || line.starts_with('#') {
-                continue;
-            }
-            let f = fields(line);
-            let parse_err = |message: String| TumError::Parse { path: path.to_path_buf(), line: i + 1, message };
+        for (line, f) in data_lines(&text) {
+            let parse_err = parse_error(path, line);
             if f.len() != 8 {
                 return Err(parse_err(format!("expected 8 fields `stamp tx ty tz qx qy qz qw`, found {}", f.len())));
             }

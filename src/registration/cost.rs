@@ -47,17 +47,22 @@ pub(crate) fn mahalanobis(t: &TermInput) -> Option<f64> {
     Some(d.dot(&(s * d)))
 }
 
-/// `e = log det Σ + dᵀΣ⁻¹d`; `None` if `Σ` is not positive definite.
+/// `(log det Σ, Σ⁻¹, d)`; `None` if `Σ` is not positive definite.
 #[inline]
-pub(crate) fn likelihood_cost(t: &TermInput) -> Option<f64> {
+fn likelihood_parts(t: &TermInput) -> Option<(f64, Matrix3<f64>, Vector3<f64>)> {
     let sigma = t.model_cov + t.c;
     let det = sigma.determinant();
     if det.is_nan() || det <= 0.0 {
         return None;
     }
-    let s = sigma.try_inverse()?;
-    let d = t.model_mean - t.p;
-    Some(det.ln() + d.dot(&(s * d)))
+    Some((det.ln(), sigma.try_inverse()?, t.model_mean - t.p))
+}
+
+/// `e = log det Σ + dᵀΣ⁻¹d`; `None` if `Σ` is not positive definite.
+#[inline]
+pub(crate) fn likelihood_cost(t: &TermInput) -> Option<f64> {
+    let (log_det, s, d) = likelihood_parts(t)?;
+    Some(log_det + d.dot(&(s * d)))
 }
 
 /// LM stage: `(e, g, H)` with `g = JᵀΣ⁻¹d`, `H = JᵀΣ⁻¹J` (Eq. 5).
@@ -107,15 +112,9 @@ fn gen_vec(k: usize, v: &Vector3<f64>) -> Vector3<f64> {
 /// Uses the structure of the rotation generators: `G_k C` permutes rows, `C G_k =
 /// −(G_k C)ᵀ` for symmetric `C`, and `G_k G_l = e_l e_kᵀ − δ_kl I`.
 pub(crate) fn likelihood_term(t: &TermInput) -> Option<(f64, Vector6<f64>, Matrix6<f64>)> {
-    let sigma = t.model_cov + t.c;
-    let det = sigma.determinant();
-    if det.is_nan() || det <= 0.0 {
-        return None;
-    }
-    let s = sigma.try_inverse()?;
-    let d = t.model_mean - t.p;
+    let (log_det, s, d) = likelihood_parts(t)?;
     let u = s * d;
-    let e = det.ln() + d.dot(&u);
+    let e = log_det + d.dot(&u);
     // First derivatives of p (through A) and of Σ (rotations only).
     let gc: [Matrix3<f64>; 3] = std::array::from_fn(|k| gen_mul(k, &t.c));
     let ds: [Matrix3<f64>; 3] = std::array::from_fn(|k| gc[k] + gc[k].transpose());
