@@ -34,6 +34,8 @@ pub mod frame;
 pub mod geometry;
 pub mod io;
 pub mod map;
+pub mod model;
 pub mod odometry;
 pub mod registration;
+pub mod slam;
 pub mod synthetic;

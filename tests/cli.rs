@@ -14,7 +14,7 @@ fn help_teaches_the_commands() {
     let out = mrsmap(&["--help"]);
     assert!(out.status.success());
     let text = String::from_utf8_lossy(&out.stdout);
-    for word in ["odometry", "eval", "bench"] {
+    for word in ["odometry", "map", "model", "eval", "bench"] {
         assert!(text.contains(word), "{text}");
     }
     let out = mrsmap(&["odometry", "--help"]);
@@ -72,4 +72,93 @@ fn errors_exit_non_zero_and_name_the_problem() {
     ]);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("/no/such/camera.toml"));
+}
+
+fn path_str(p: &std::path::Path) -> &str {
+    p.to_str().expect("utf-8 path")
+}
+
+#[test]
+fn map_then_model_info_and_render() {
+    let dir = temp_dir("cli-map");
+    let (model, traj, png) = (dir.join("teddy.mrsm"), dir.join("slam.txt"), dir.join("teddy.png"));
+    let object = root().join("robot_config/objects/teddy.toml");
+    let (clip, camera) = (teddy_clip(), fr3_camera_file());
+    let args = [
+        "map",
+        "--dataset",
+        path_str(&clip),
+        "--camera",
+        path_str(&camera),
+        "--object",
+        path_str(&object),
+        "--out",
+        path_str(&model),
+        "--trajectory",
+        path_str(&traj),
+    ];
+    let out = mrsmap(&args);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = String::from_utf8_lossy(&out.stdout);
+    for word in ["8 frames", "key views", "loop closures", "graph step", "ATE", "model 'teddy' (object frame)"] {
+        assert!(text.contains(word), "missing {word:?} in\n{text}");
+    }
+    assert_eq!(std::fs::read_to_string(&traj).expect("trajectory").lines().filter(|l| !l.starts_with('#')).count(), 8);
+    // The model is not overwritten by accident.
+    let again = mrsmap(&args);
+    assert!(!again.status.success());
+    assert!(String::from_utf8_lossy(&again.stderr).contains("--force"), "{}", String::from_utf8_lossy(&again.stderr));
+    let info = mrsmap(&["model", "info", path_str(&model)]);
+    assert!(info.status.success(), "{}", String::from_utf8_lossy(&info.stderr));
+    let text = String::from_utf8_lossy(&info.stdout);
+    for word in ["model 'teddy'", "frame            object", "prism", "root statistics", "usable surfels"] {
+        assert!(text.contains(word), "missing {word:?} in\n{text}");
+    }
+    let render =
+        mrsmap(&["model", "render", path_str(&model), "--out", path_str(&png), "--width", "320", "--height", "240"]);
+    assert!(render.status.success(), "{}", String::from_utf8_lossy(&render.stderr));
+    let mut reader = mrsmap::io::image::PngReader::default();
+    let mut rgb = Vec::new();
+    reader.read_rgb8(&png, (320, 240), &mut rgb).expect("a 320x240 RGB picture");
+    let background = rgb.chunks_exact(3).filter(|p| p == &[32, 34, 38]).count();
+    assert!(background < 320 * 240 * 95 / 100, "the picture shows the model ({background} background pixels)");
+    // A damaged model: a clear error naming the file.
+    let bytes = std::fs::read(&model).expect("model");
+    let cut = dir.join("cut.mrsm");
+    std::fs::write(&cut, &bytes[..bytes.len() / 3]).expect("write");
+    let info = mrsmap(&["model", "info", path_str(&cut)]);
+    assert!(!info.status.success());
+    let err = String::from_utf8_lossy(&info.stderr);
+    assert!(err.contains("cut.mrsm") && err.contains("truncated"), "{err}");
+}
+
+#[test]
+fn map_refuses_to_run_with_nothing_to_write_and_reports_an_empty_volume() {
+    let dir = temp_dir("cli-map-empty");
+    let (clip, camera) = (teddy_clip(), fr3_camera_file());
+    let out = mrsmap(&["map", "--dataset", path_str(&clip), "--camera", path_str(&camera)]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("nothing to write"));
+    let object = dir.join("far.toml");
+    std::fs::write(&object, "name = \"far\"\n[volume]\ncenter = [40.0, 0.0, 0.0]\nhalf_extents_m = [0.2, 0.2, 0.2]\n")
+        .expect("write");
+    let (model, traj) = (dir.join("far.mrsm"), dir.join("slam.txt"));
+    let out = mrsmap(&[
+        "map",
+        "--dataset",
+        path_str(&clip),
+        "--camera",
+        path_str(&camera),
+        "--object",
+        path_str(&object),
+        "--out",
+        path_str(&model),
+        "--trajectory",
+        path_str(&traj),
+    ]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("volume of interest") && err.contains("trajectory was written"), "{err}");
+    assert!(traj.exists(), "the trajectory is kept");
+    assert!(!model.exists(), "no half-made model");
 }

@@ -30,6 +30,10 @@ pub struct BenchJob {
     pub threads: Option<usize>,
     /// Run at VGA (full size) and/or QVGA (halved).
     pub resolutions: Vec<Resolution>,
+    /// Key views of the synthetic pose graph whose optimisation step is timed.
+    pub graph_key_views: usize,
+    /// Odometry parameters (map resolution factor λ and the rest).
+    pub params: OdometryParams,
 }
 
 /// An image size to benchmark.
@@ -83,8 +87,7 @@ fn run_one(
     frames: &[Decoded],
     pool: &rayon::ThreadPool,
 ) -> Result<BenchResult> {
-    let mut odometry =
-        Odometry::new(OdometryParams::default(), camera.width as usize, camera.height as usize, Pose::identity())?;
+    let mut odometry = Odometry::new(job.params, camera.width as usize, camera.height as usize, Pose::identity())?;
     let mut r = BenchResult {
         label,
         width: camera.width,
@@ -142,6 +145,64 @@ pub fn run(job: &BenchJob) -> Result<Vec<BenchResult>> {
         out.push(run_one(job, label, cam, &frames, &pool)?);
     }
     Ok(out)
+}
+
+/// Times of one pose-graph step (ms) on a synthetic graph shaped like a mapping run:
+/// `key_views` key views on a circle of 1 m radius around an object, each joined to its
+/// predecessor and by loop closures to up to three earlier key views within 0.7 m
+/// (about 3.7 edges per key view, as on fr3_teddy), measurements perturbed by 5 mm /
+/// 0.01 rad, odometry-chained initial poses. Each of `steps` calls is one on-line step,
+/// as the mapper makes one per frame: the first ones converge, the later ones mostly
+/// confirm the optimum.
+pub fn graph_step_ms(key_views: usize, steps: usize) -> (usize, Vec<f64>) {
+    use crate::geometry::se3::left_increment;
+    use crate::slam::{Edge, EdgeKind, PoseGraph};
+    use crate::synthetic::Pcg32;
+    use nalgebra::{Matrix6, Translation3, UnitQuaternion, Vector3, Vector6};
+    let mut rng = Pcg32::new(7);
+    let truth: Vec<Pose> = (0..key_views)
+        .map(|k| {
+            let a = k as f64 / key_views.max(1) as f64 * std::f64::consts::TAU * 1.5;
+            let eye = Vector3::new(a.cos(), a.sin(), 0.3 * (3.0 * a).sin());
+            let look = UnitQuaternion::face_towards(&-eye, &Vector3::z());
+            Pose::from_parts(Translation3::from(eye), look)
+        })
+        .collect();
+    let noise = |rng: &mut Pcg32| {
+        left_increment(&Vector6::from_fn(
+            |i, _| if i < 3 { rng.uniform(-0.005, 0.005) } else { rng.uniform(-0.01, 0.01) },
+        ))
+    };
+    let information = Matrix6::from_diagonal(&Vector6::new(2.5e5, 2.5e5, 2.5e5, 1e5, 1e5, 1e5));
+    let mut graph = PoseGraph::new();
+    let mut estimate = truth[0];
+    graph.add_vertex(estimate);
+    for k in 1..key_views {
+        let z = noise(&mut rng) * truth[k - 1].inverse() * truth[k];
+        estimate *= z;
+        graph.add_vertex(estimate);
+        let _ = graph.add_edge(Edge { from: k - 1, to: k, measurement: z, information, kind: EdgeKind::KeyView });
+        let close: Vec<usize> = (0..k.saturating_sub(1))
+            .filter(|&j| (truth[j].translation.vector - truth[k].translation.vector).norm() < 0.7)
+            .collect();
+        for _ in 0..3.min(close.len()) {
+            let j = close[(rng.next_u32() as usize) % close.len()];
+            if !graph.connected(j, k) {
+                let z = noise(&mut rng) * truth[j].inverse() * truth[k];
+                let _ =
+                    graph.add_edge(Edge { from: j, to: k, measurement: z, information, kind: EdgeKind::LoopClosure });
+            }
+        }
+    }
+    let edges = graph.edges.len();
+    let times = (0..steps)
+        .map(|_| {
+            let t = Instant::now();
+            let _ = graph.step();
+            t.elapsed().as_secs_f64() * 1e3
+        })
+        .collect();
+    (edges, times)
 }
 
 /// Prints results as a Markdown table.

@@ -1,5 +1,6 @@
 //! `mrsmap odometry`: frame-to-frame odometry over a TUM RGB-D dataset.
 
+use super::dataset::{initial_pose, thread_pool};
 use super::report::{percentile, progress_bar};
 use crate::eval::{ErrorStats, associate, rpe_translation};
 use crate::geometry::Pose;
@@ -52,33 +53,6 @@ pub struct OdometrySummary {
     pub register_ms: Vec<f64>,
     /// RPE against ground truth, if the dataset has it.
     pub rpe: Option<ErrorStats>,
-}
-
-/// The pose of the first frame: ground truth interpolated at its depth stamp if the
-/// dataset has it (the nearest sample if the frame is just outside the span).
-fn initial_pose(dataset: &TumDataset, stamp_ns: u64, notes: &mut String) -> Pose {
-    let Some(gt) = &dataset.groundtruth else {
-        let _ = writeln!(notes, "no groundtruth.txt: trajectory starts at identity");
-        return Pose::identity();
-    };
-    let stamp = stamp_ns as f64 * 1e-9;
-    if let Some(p) = gt.interpolate(stamp, 0.1) {
-        let _ = writeln!(notes, "starts at the ground-truth pose interpolated at {}", format_stamp(stamp_ns));
-        return p;
-    }
-    match gt.nearest(stamp) {
-        Some((p, dt)) if dt < 1.0 => {
-            let _ = writeln!(
-                notes,
-                "first frame is {dt:.3} s outside the ground truth: starts at the nearest ground-truth pose"
-            );
-            p
-        }
-        _ => {
-            let _ = writeln!(notes, "first frame is far from any ground-truth pose: trajectory starts at identity");
-            Pose::identity()
-        }
-    }
 }
 
 /// What a run accumulates frame by frame.
@@ -163,11 +137,7 @@ pub fn run(job: &OdometryJob) -> Result<OdometrySummary> {
     let mut notes = String::new();
     let start = initial_pose(&dataset, frames[0].depth_stamp_ns, &mut notes);
     let mut odometry = Odometry::new(job.params, cam.width as usize, cam.height as usize, start)?;
-    let mut pool = rayon::ThreadPoolBuilder::new();
-    if let Some(t) = job.threads {
-        pool = pool.num_threads(t);
-    }
-    let pool = pool.build().context("starting the thread pool")?;
+    let pool = thread_pool(job.threads)?;
     let bar = progress_bar(frames.len() as u64, "odometry");
     let mut rec = Record::new(frames.len());
     for entry in &frames {

@@ -4,4 +4,5 @@
 pub mod camera_file;
 pub mod frames;
 pub mod image;
+pub mod object_file;
 pub mod tum;

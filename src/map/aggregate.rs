@@ -90,6 +90,16 @@ fn accumulate(m: &mut Moments, v: &[f32; 6]) {
     }
 }
 
+/// Where a frame's points go when it is fused into a map in another frame.
+pub(crate) struct Placement<'a> {
+    /// `map_from_camera` rotation.
+    pub rotation: nalgebra::Matrix3<f32>,
+    /// `map_from_camera` translation.
+    pub translation: nalgebra::Vector3<f32>,
+    /// Keeps a point (map frame) or drops it (outside the volume of interest).
+    pub keep: &'a (dyn Fn(&nalgebra::Vector3<f32>) -> bool + Sync),
+}
+
 /// What every band reads.
 pub(crate) struct AggregationInput<'a> {
     pub frame: &'a RgbdFrame<'a>,
@@ -101,6 +111,9 @@ pub(crate) struct AggregationInput<'a> {
     pub inv_resolution: [f32; MAX_LEVELS],
     pub num_levels: usize,
     pub smooth_view_dirs: bool,
+    /// Fusion: the points are placed in another frame and filtered; pixels on virtual
+    /// borders are left out (their cells are seen only in part).
+    pub placement: Option<Placement<'a>>,
 }
 
 /// Packs level and key into one comparable word (`u64::MAX` = no cell).
@@ -174,6 +187,24 @@ impl Band {
         }
     }
 
+    /// The aggregate of the same cell among the pixel's already visited neighbours
+    /// (above-left, above, above-right, left), `NONE` if there is none (§3.3).
+    #[inline(always)]
+    fn neighbour_aggregate(&self, u: usize, first_row: bool, packed: u64) -> u32 {
+        let width = self.cur.len();
+        if !first_row && self.prev[u].0 == packed {
+            self.prev[u].1
+        } else if !first_row && u > 0 && self.prev[u - 1].0 == packed {
+            self.prev[u - 1].1
+        } else if !first_row && u + 1 < width && self.prev[u + 1].0 == packed {
+            self.prev[u + 1].1
+        } else if u > 0 && self.cur[u - 1].0 == packed {
+            self.cur[u - 1].1
+        } else {
+            NONE
+        }
+    }
+
     #[inline(always)]
     fn pixel(&mut self, input: &AggregationInput, idx: usize, u: usize, first_row: bool, scale: f32) -> (u64, u32) {
         let d = input.frame.depth[idx];
@@ -190,22 +221,29 @@ impl Band {
         if level >= input.num_levels {
             return (NO_CELL, NONE);
         }
-        let (x, y) = (ray.x * z, ray.y * z);
+        let (mut x, mut y, mut z) = (ray.x * z, ray.y * z, z);
+        let flags = input.flags[idx].load(Ordering::Relaxed);
+        let mut dirs = if input.smooth_view_dirs { ray.near_dirs } else { 1 << ray.best_dir };
+        let mut near_dirs = ray.near_dirs;
+        if let Some(pl) = &input.placement {
+            if flags & VIRTUAL_BORDER != 0 {
+                return (NO_CELL, NONE);
+            }
+            let pc = nalgebra::Vector3::new(x, y, z);
+            let pm = pl.rotation * pc + pl.translation;
+            if !(pl.keep)(&pm) {
+                return (NO_CELL, NONE);
+            }
+            let view = (pl.rotation * pc).normalize();
+            let (best, near) = crate::frame::rays::view_dirs_of([view.x, view.y, view.z]);
+            dirs = if input.smooth_view_dirs { near } else { 1 << best };
+            near_dirs = near;
+            (x, y, z) = (pm.x, pm.y, pm.z);
+        }
         let inv = input.inv_resolution[level];
         let key = [floor_i32(x * inv), floor_i32(y * inv), floor_i32(z * inv)];
         let packed = pack(level, key);
-        let width = self.cur.len();
-        let joined = if !first_row && self.prev[u].0 == packed {
-            self.prev[u].1
-        } else if !first_row && u > 0 && self.prev[u - 1].0 == packed {
-            self.prev[u - 1].1
-        } else if !first_row && u + 1 < width && self.prev[u + 1].0 == packed {
-            self.prev[u + 1].1
-        } else if u > 0 && self.cur[u - 1].0 == packed {
-            self.cur[u - 1].1
-        } else {
-            NONE
-        };
+        let joined = self.neighbour_aggregate(u, first_row, packed);
         let rgb = &input.frame.rgb[3 * idx..3 * idx + 3];
         let [l, a, b] = rgb8_to_lab(rgb[0], rgb[1], rgb[2]);
         let point = [x, y, z, l, a, b];
@@ -216,7 +254,14 @@ impl Band {
                 self.dropped_points += 1;
                 return (NO_CELL, NONE);
             }
-            let n = (x * x + y * y + z * z).sqrt();
+            let n = ray.range2_factor.sqrt();
+            let view_dir = match &input.placement {
+                Some(pl) => {
+                    let v = pl.rotation * nalgebra::Vector3::new(ray.x / n, ray.y / n, 1.0 / n);
+                    [v.x, v.y, v.z]
+                }
+                None => [ray.x / n, ray.y / n, 1.0 / n],
+            };
             self.aggregates.push(Aggregate {
                 key,
                 level: level as u8,
@@ -225,15 +270,13 @@ impl Band {
                 border: false,
                 moments: [NONE; 6],
                 reference: point,
-                view_dir: [x / n, y / n, z / n],
+                view_dir,
             });
             self.aggregates.len() as u32 - 1
         };
-        let flags = input.flags[idx].load(Ordering::Relaxed);
-        let dirs = if input.smooth_view_dirs { ray.near_dirs } else { 1 << ray.best_dir };
         let aggregate = &mut self.aggregates[agg as usize];
         if flags & VIRTUAL_BORDER != 0 {
-            aggregate.excluded_dirs |= ray.near_dirs;
+            aggregate.excluded_dirs |= near_dirs;
         }
         aggregate.border |= flags & FOREGROUND_BORDER != 0;
         let r = aggregate.reference;

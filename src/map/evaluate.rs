@@ -92,13 +92,36 @@ pub(crate) fn evaluate_statistics(map: &mut SurfelMap, raw: &mut [RawMoments]) {
     let params = map.params;
     let nodes = &map.tree.nodes;
     let stats = &map.stats;
+    let thresholds = params.level_thresholds_r2();
+    let top = params.num_levels - 1;
     map.surfels.par_chunks_mut(CHUNK).zip(raw.par_chunks_mut(CHUNK)).enumerate().for_each(|(c, (surfels, raw))| {
         for (k, (s, r)) in surfels.iter_mut().zip(raw.iter_mut()).enumerate() {
             let st = &stats[c * CHUNK + k];
             *r = RawMoments::of(st);
-            evaluate_one(&params, &nodes[s.node as usize], st, s);
+            let node = &nodes[s.node as usize];
+            evaluate_one(&params, node, st, s);
+            if params.exclude_level_boundaries
+                && (node.level as usize) < top
+                && cut_by_level_range(&params, node, &thresholds)
+            {
+                s.excluded = true;
+                s.usable = false;
+            }
         }
     });
+}
+
+/// Whether the cell's farthest corner from the sensor (at the origin) lies beyond the
+/// range up to which points are inserted at the cell's level.
+fn cut_by_level_range(params: &MapParams, node: &Node, thresholds_r2: &[f32]) -> bool {
+    let res = params.resolution(node.level as usize);
+    let far2: f64 = (0..3)
+        .map(|i| {
+            let (lo, hi) = (node.key[i] as f64 * res, (node.key[i] + 1) as f64 * res);
+            lo.abs().max(hi.abs()).powi(2)
+        })
+        .sum();
+    far2 >= thresholds_r2[node.level as usize] as f64
 }
 
 fn evaluate_one(params: &MapParams, node: &Node, st: &SurfelStats, s: &mut Surfel) {

@@ -10,17 +10,20 @@
 //! first. The map owns no notion of time, poses over time, files or threads.
 
 mod aggregate;
+mod assemble;
 mod border;
 mod build;
 mod descriptor;
 mod evaluate;
 pub mod params;
+mod restore;
 pub mod stats;
 pub mod tree;
 
-pub use build::{BuildReport, MapBuilder, MapError};
+pub use build::{BuildReport, MapBuilder, MapError, PlacedFrame};
 pub use descriptor::{DESCRIPTOR_LEN, Descriptor, descriptor_distance2};
 pub use params::{MAX_LEVELS, MapCapacity, MapParams, MapParamsError};
+pub use restore::{MapParts, RestoreError};
 pub use stats::SurfelStats;
 pub use tree::{NONE, Node, NodeArena, SELF_NEIGHBOR, neighbor_index};
 
@@ -218,6 +221,22 @@ impl SurfelMap {
     /// Capacity in nodes.
     pub fn node_capacity(&self) -> usize {
         self.tree.capacity()
+    }
+
+    /// A copy whose storage holds exactly the content (for maps that are kept, such as
+    /// key views; a map built per frame keeps room for any frame).
+    pub fn to_compact(&self) -> SurfelMap {
+        SurfelMap {
+            params: self.params,
+            tree: self.tree.to_compact(),
+            stats: self.stats.clone(),
+            surfels: self.surfels.clone(),
+            normals: self.normals.clone(),
+            view_dirs: self.view_dirs.clone(),
+            descriptors: self.descriptors.clone(),
+            surfel_neighbors: self.surfel_neighbors.clone(),
+            surfel_capacity: self.surfels.len(),
+        }
     }
 
     /// Number of usable surfels (valid and not excluded) per level, finest first.

@@ -48,6 +48,12 @@ pub struct MapParams {
     /// Mark the nearer pixel of depth jumps as foreground contour (§3.4); contour surfels
     /// only match contour surfels.
     pub mark_foreground_borders: bool,
+    /// Keep out of registration the cells cut by the range at which points stop being
+    /// inserted at their level: they hold only the nearer points, and that part moves
+    /// with the camera, biasing the mean (measured: odometry RPE median teddy 2.01 →
+    /// 1.89 mm, fr1_xyz RMSE 2.97 → 2.78 mm). For maps built from one frame (the sensor
+    /// at the origin); fused maps set it off.
+    pub exclude_level_boundaries: bool,
     /// Weight of the neighbours' descriptors when smoothing shape–texture descriptors (§3.2).
     pub descriptor_neighbor_weight: f32,
     /// Luminance and chrominance differences at which texture bins saturate (§3.2).
@@ -66,6 +72,7 @@ impl Default for MapParams {
             smooth_normals: true,
             depth_jump_ratio: 0.9,
             mark_foreground_borders: true,
+            exclude_level_boundaries: true,
             descriptor_neighbor_weight: 0.1,
             texture_bin_threshold: 0.1,
         }

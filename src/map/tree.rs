@@ -192,6 +192,55 @@ impl NodeArena {
         self.top.clear();
     }
 
+    /// An arena holding `nodes` (level by level, coarsest first, as given by the
+    /// ranges); `None` if two top-level nodes share a cell.
+    pub(crate) fn from_nodes(
+        nodes: Vec<Node>,
+        level_start: [u32; MAX_LEVELS],
+        level_end: [u32; MAX_LEVELS],
+        num_levels: usize,
+    ) -> Option<NodeArena> {
+        let top_level = num_levels - 1;
+        let mut top = CellHash::with_capacity((level_end[top_level] - level_start[top_level]) as usize);
+        for i in level_start[top_level]..level_end[top_level] {
+            let key = nodes[i as usize].key;
+            if top.get(key).is_some() {
+                return None;
+            }
+            top.get_or_insert(key, || Some(i))?;
+        }
+        let capacity = nodes.len();
+        Some(NodeArena {
+            neighbors: Vec::with_capacity(capacity),
+            nodes,
+            level_start,
+            level_end,
+            num_levels,
+            top,
+            capacity,
+        })
+    }
+
+    /// A copy with storage for exactly its nodes.
+    pub(crate) fn to_compact(&self) -> NodeArena {
+        let mut top = CellHash::with_capacity(
+            self.level_end[self.top_level()] as usize - self.level_start[self.top_level()] as usize,
+        );
+        for i in self.level_start[self.top_level()]..self.level_end[self.top_level()] {
+            let key = self.nodes[i as usize].key;
+            top.get_or_insert(key, || Some(i));
+        }
+        NodeArena {
+            nodes: self.nodes.clone(),
+            neighbors: self.neighbors.clone(),
+            level_start: self.level_start,
+            level_end: self.level_end,
+            num_levels: self.num_levels,
+            top,
+            capacity: self.nodes.len(),
+        }
+    }
+
     /// Capacity in nodes.
     pub fn capacity(&self) -> usize {
         self.capacity

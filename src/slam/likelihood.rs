@@ -1,0 +1,114 @@
+//! How well one map explains another under a pose: the matching score used to
+//! validate loop closures (paper §5.1.1).
+//!
+//! Each usable surfel of `a`, transformed into `b`, is compared with the surfels of `b`
+//! at the same level in the 3×3×3 cells around it whose view direction and normal agree
+//! (normals within 45°); the best gives the Mahalanobis distance `m²` of the means under
+//! `Σ = Σₐ' + Σ_b + a·res²·I`. The surfel's score is its log-likelihood gain over the
+//! floor of an unmatched surfel at `m² = χ²_floor`: `max(0, ½(χ²_floor − m²))`. A perfect
+//! match of a surfel with itself scores about `½(χ²_floor − 3)`; an unrelated map ≈ 0.
+
+use crate::geometry::Pose;
+use crate::map::{NONE, SurfelMap};
+use nalgebra::{Matrix3, Vector3};
+use rayon::prelude::*;
+
+/// The squared Mahalanobis distance at which a match counts as no match (3σ in 3-D).
+pub const CHI2_FLOOR: f64 = 9.0;
+
+/// Cosine of the largest angle between matched normals (45°).
+const NORMAL_MIN_COS: f32 = std::f32::consts::FRAC_1_SQRT_2;
+
+/// Surfels per parallel work item (fixed: the sum does not depend on threads).
+const CHUNK: usize = 512;
+
+/// The matching score of `a` against `b`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MatchScore {
+    /// Sum of the per-surfel gains.
+    pub total: f64,
+    /// Surfels of `a` that found a match within the floor.
+    pub matched: usize,
+    /// Usable surfels of `a`.
+    pub surfels: usize,
+}
+
+/// Scores how well `b` explains `a` when `a`'s coordinates are mapped by `b_from_a`.
+pub fn match_score(a: &SurfelMap, b: &SurfelMap, b_from_a: &Pose, regularization: f64) -> MatchScore {
+    let r = b_from_a.rotation.to_rotation_matrix().into_inner();
+    let t = b_from_a.translation.vector;
+    let rf = r.cast::<f32>();
+    let partial: Vec<(f64, usize, usize)> = a
+        .surfels()
+        .par_chunks(CHUNK)
+        .zip(a.normals().par_chunks(CHUNK))
+        .map(|(surfels, normals)| {
+            let mut acc = (0.0, 0, 0);
+            for (s, n) in surfels.iter().zip(normals) {
+                if !s.usable() || s.level as usize >= b.num_levels() {
+                    continue;
+                }
+                acc.2 += 1;
+                let level = s.level as usize;
+                let res = b.resolution(level);
+                let reg = Matrix3::identity() * (regularization * res * res);
+                let p = r * s.mean.cast::<f64>() + t;
+                let c = r * s.cov() * r.transpose() + reg;
+                let normal = rf * n;
+                let best = best_match(b, level, &p, &c, &normal, s.dir, &rf, &reg);
+                if best < CHI2_FLOOR {
+                    acc.0 += 0.5 * (CHI2_FLOOR - best);
+                    acc.1 += 1;
+                }
+            }
+            acc
+        })
+        .collect();
+    let (total, matched, surfels) = partial.iter().fold((0.0, 0, 0), |a, p| (a.0 + p.0, a.1 + p.1, a.2 + p.2));
+    MatchScore { total, matched, surfels }
+}
+
+/// The smallest Mahalanobis distance to a compatible surfel of `b` near `p`.
+#[allow(clippy::too_many_arguments)]
+fn best_match(
+    b: &SurfelMap,
+    level: usize,
+    p: &Vector3<f64>,
+    c: &Matrix3<f64>,
+    normal: &Vector3<f32>,
+    dir: u8,
+    r: &Matrix3<f32>,
+    reg: &Matrix3<f64>,
+) -> f64 {
+    let axis = crate::frame::rays::VIEW_AXES[dir as usize];
+    let view = r * Vector3::new(axis[0], axis[1], axis[2]);
+    let Some(center) = b.find(level, b.key_of(p, level)).or_else(|| {
+        // The cell of p may be empty while a neighbour is not: try the six faces.
+        let k = b.key_of(p, level);
+        (0..6).find_map(|f| {
+            let mut kk = k;
+            kk[f / 2] += if f % 2 == 0 { 1 } else { -1 };
+            b.find(level, kk)
+        })
+    }) else {
+        return f64::INFINITY;
+    };
+    let mut best = f64::INFINITY;
+    for &m in b.neighbors(center).iter().filter(|&&m| m != NONE) {
+        for &sb in b.nodes()[m as usize].surfels.iter().filter(|&&s| s != NONE) {
+            let other = &b.surfels()[sb as usize];
+            let oa = crate::frame::rays::VIEW_AXES[other.dir as usize];
+            if !other.usable() || view.dot(&Vector3::new(oa[0], oa[1], oa[2])) < 0.5 {
+                continue;
+            }
+            if normal.dot(&b.normals()[sb as usize]) < NORMAL_MIN_COS {
+                continue;
+            }
+            let sigma = c + other.cov() + reg;
+            let Some(inv) = sigma.try_inverse() else { continue };
+            let d = other.mean.cast::<f64>() - p;
+            best = best.min(d.dot(&(inv * d)));
+        }
+    }
+    best
+}
