@@ -39,3 +39,4 @@ pub mod odometry;
 pub mod registration;
 pub mod slam;
 pub mod synthetic;
+pub mod tracking;

@@ -121,7 +121,7 @@ fn fusion_keeps_the_volume_of_interest_and_rejects_an_empty_one() {
 
 #[test]
 fn the_matching_likelihood_rejects_a_wrong_constraint() {
-    use mrsmap::slam::likelihood::match_score;
+    use mrsmap::registration::match_score;
     let poses = sweep();
     let frames = render_all(&poses[..9]);
     let (a, b) = (build_map(&frames[0]), build_map(&frames[8]));

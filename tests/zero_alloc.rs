@@ -1,6 +1,5 @@
 //! No heap allocation in map building and registration after the first frame, counted
 //! on every thread (rayon workers included) by a global allocator.
-#![allow(unsafe_code)]
 
 mod common;
 
@@ -11,35 +10,12 @@ use mrsmap::io::camera_file::read_camera;
 use mrsmap::io::frames::FrameLoader;
 use mrsmap::io::tum::TumDataset;
 use mrsmap::odometry::{Odometry, OdometryParams};
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-
-struct Counting;
-
-static ARMED: AtomicBool = AtomicBool::new(false);
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
-
-// SAFETY: forwards every call to the system allocator unchanged; only counts.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        if ARMED.load(Ordering::Relaxed) {
-            ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        }
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        if ARMED.load(Ordering::Relaxed) {
-            ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        }
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
+use std::sync::atomic::Ordering;
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;
+
+use common::counting_alloc::{ALLOCATIONS, ARMED, Counting};
 
 fn allocations_per_frame(half: bool) -> (usize, usize) {
     let camera = read_camera(&fr3_camera_file()).expect("camera");

@@ -2,7 +2,7 @@
 
 use super::dataset::{initial_pose, thread_pool};
 use super::report::{percentile, progress_bar};
-use crate::eval::{ErrorStats, associate, ate_translation};
+use crate::eval::{ErrorStats, align_rigid, associate, ate_translation};
 use crate::geometry::Pose;
 use crate::io::camera_file::read_camera;
 use crate::io::frames::{FrameLoader, LoadError};
@@ -129,6 +129,14 @@ pub fn run(job: &MapJob) -> Result<MapSummary> {
         let w = format!("final optimisation stopped early: {e}; poses are the last good estimate");
         let _ = writeln!(notes, "{w}");
         warnings.push(w);
+    }
+    if let Some(alignment) = ground_truth_alignment(&dataset, &slam) {
+        slam.change_world(&alignment.0);
+        let _ = writeln!(
+            notes,
+            "world frame: the ground truth's, by rigid alignment of the whole trajectory ({} poses; the first pose alone is only as good as the ground truth at the first frame)",
+            alignment.1
+        );
     }
     let trajectory: Vec<(u64, Pose)> = slam.trajectory().iter().map(|(s, p, _)| (*s, *p)).collect();
     if let Some(path) = &job.trajectory {
@@ -282,6 +290,26 @@ fn model_header(
         nodes: fused.map.nodes().len() as u32,
         surfels: fused.map.surfels().len() as u32,
     }
+}
+
+/// The rigid transform that best aligns the SLAM trajectory with the ground truth (and
+/// the number of poses it rests on), when the dataset has ground truth.
+fn ground_truth_alignment(dataset: &TumDataset, slam: &Slam) -> Option<(Pose, usize)> {
+    let gt = dataset.groundtruth.as_ref()?;
+    let trajectory = slam.trajectory();
+    let est = Trajectory {
+        stamps: trajectory.iter().map(|(t, _, _)| *t as f64 * 1e-9).collect(),
+        poses: trajectory.iter().map(|(_, p, _)| *p).collect(),
+    };
+    let (reference, estimate) = associate(gt, &est, 0.02).ok()?;
+    if reference.len() < 3 {
+        return None;
+    }
+    let x: Vec<_> = estimate.iter().map(|p| p.translation.vector).collect();
+    let y: Vec<_> = reference.iter().map(|p| p.translation.vector).collect();
+    let (r, t) = align_rigid(&x, &y);
+    let rotation = nalgebra::UnitQuaternion::from_matrix(&r);
+    Some((Pose::from_parts(nalgebra::Translation3::from(t), rotation), reference.len()))
 }
 
 fn ate_against(dataset: &TumDataset, trajectory: &[(u64, Pose)]) -> Option<ErrorStats> {

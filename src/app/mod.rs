@@ -2,9 +2,14 @@
 //! The only place besides `main.rs` that talks to the user.
 
 pub mod bench;
+pub mod camera_driver;
 pub mod dataset;
 pub mod mapper;
 pub mod model_cmd;
 pub mod odometry;
+pub mod poses_client;
 pub mod render;
 pub mod report;
+pub mod track_dataset;
+pub mod tracker_process;
+pub mod tracking;

@@ -4,5 +4,8 @@
 pub mod camera_file;
 pub mod frames;
 pub mod image;
+pub mod ipc;
 pub mod object_file;
+pub mod tracker_config;
 pub mod tum;
+pub mod wire;

@@ -15,6 +15,7 @@
 //! `f32`, which is exact enough because `p − r` is at most a cell across.
 
 use super::params::MAX_LEVELS;
+use super::region::PixelGate;
 use super::stats::{PACKED6, SurfelStats};
 use crate::frame::{PixelRay, RgbdFrame};
 use crate::geometry::color::rgb8_to_lab;
@@ -114,6 +115,10 @@ pub(crate) struct AggregationInput<'a> {
     /// Fusion: the points are placed in another frame and filtered; pixels on virtual
     /// borders are left out (their cells are seen only in part).
     pub placement: Option<Placement<'a>>,
+    /// Image columns that enter (the rows are the bands').
+    pub cols: std::ops::Range<usize>,
+    /// Tracking: only the points this gate keeps enter (paper §5.2).
+    pub gate: Option<&'a PixelGate>,
 }
 
 /// Packs level and key into one comparable word (`u64::MAX` = no cell).
@@ -178,7 +183,7 @@ impl Band {
         self.prev.iter_mut().for_each(|c| *c = (NO_CELL, NONE));
         for v in self.rows.clone() {
             let first_row = v == self.rows.start;
-            for u in 0..width {
+            for u in input.cols.clone() {
                 let idx = v * width + u;
                 let cell = self.pixel(input, idx, u, first_row, scale);
                 self.cur[u] = cell;
@@ -222,6 +227,11 @@ impl Band {
             return (NO_CELL, NONE);
         }
         let (mut x, mut y, mut z) = (ray.x * z, ray.y * z, z);
+        if let Some(gate) = input.gate
+            && !gate.keeps(&nalgebra::Vector3::new(x, y, z))
+        {
+            return (NO_CELL, NONE);
+        }
         let flags = input.flags[idx].load(Ordering::Relaxed);
         let mut dirs = if input.smooth_view_dirs { ray.near_dirs } else { 1 << ray.best_dir };
         let mut near_dirs = ray.near_dirs;

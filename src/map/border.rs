@@ -13,6 +13,7 @@
 
 use crate::frame::PixelRay;
 use rayon::prelude::*;
+use std::ops::Range;
 use std::sync::atomic::{AtomicU8, Ordering};
 
 /// The pixel lies on a virtual or image border.
@@ -67,14 +68,21 @@ fn range2(depth: u16, ray: &PixelRay) -> f32 {
     d * d * ray.range2_factor
 }
 
-/// Sets border flags for every pixel; `flags` must be cleared and hold `width · height`
-/// entries. `jump_ratio` is the paper's 0.9.
-pub(crate) fn mark_borders(depth: &[u16], rays: &[PixelRay], width: usize, flags: &[AtomicU8], jump_ratio: f32) {
+/// Sets border flags for the pixels of `rows × cols` (image `width` pixels wide); the
+/// flags of those pixels must be cleared. The region's edges count as image borders: a
+/// map built from the region sees nothing beyond them. `jump_ratio` is the paper's 0.9.
+pub(crate) fn mark_borders(
+    depth: &[u16],
+    rays: &[PixelRay],
+    width: usize,
+    (rows, cols): (Range<usize>, Range<usize>),
+    flags: &[AtomicU8],
+    jump_ratio: f32,
+) {
     let jump2 = jump_ratio * jump_ratio;
-    let height = depth.len() / width;
-    (0..height).into_par_iter().for_each(|v| {
+    rows.clone().into_par_iter().for_each(|v| {
         let mut scan = LineScan::new(jump2);
-        for u in 0..width {
+        for u in cols.clone() {
             let idx = v * width + u;
             if depth[idx] != 0 {
                 scan.visit(idx, range2(depth[idx], &rays[idx]), flags);
@@ -82,11 +90,11 @@ pub(crate) fn mark_borders(depth: &[u16], rays: &[PixelRay], width: usize, flags
         }
         scan.finish(flags);
     });
-    (0..width.div_ceil(STRIPE)).into_par_iter().for_each(|stripe| {
-        let u0 = stripe * STRIPE;
-        let u1 = (u0 + STRIPE).min(width);
+    (0..cols.len().div_ceil(STRIPE)).into_par_iter().for_each(|stripe| {
+        let u0 = cols.start + stripe * STRIPE;
+        let u1 = (u0 + STRIPE).min(cols.end);
         let mut scans: [LineScan; STRIPE] = std::array::from_fn(|_| LineScan::new(jump2));
-        for v in 0..height {
+        for v in rows.clone() {
             for (u, scan) in (u0..u1).zip(scans.iter_mut()) {
                 let idx = v * width + u;
                 if depth[idx] != 0 {
@@ -109,7 +117,7 @@ mod tests {
         let depth: Vec<u16> = vec![10000, 10000, 10000, 5000, 5000, 5000];
         let rays = vec![PixelRay { range2_factor: 1.0, ..Default::default() }; width];
         let flags: Vec<AtomicU8> = (0..width).map(|_| AtomicU8::new(0)).collect();
-        mark_borders(&depth, &rays, width, &flags, 0.9);
+        mark_borders(&depth, &rays, width, (0..depth.len() / width, 0..width), &flags, 0.9);
         let f: Vec<u8> = flags.iter().map(|a| a.load(Ordering::Relaxed)).collect();
         // Every pixel is the first and last of its column: all are virtual borders.
         assert!(f.iter().all(|x| x & VIRTUAL_BORDER != 0));
@@ -130,7 +138,7 @@ mod tests {
         depth[9] = 5000;
         let rays = vec![PixelRay { range2_factor: 1.0, ..Default::default() }; width * height];
         let flags: Vec<AtomicU8> = (0..width * height).map(|_| AtomicU8::new(0)).collect();
-        mark_borders(&depth, &rays, width, &flags, 0.9);
+        mark_borders(&depth, &rays, width, (0..depth.len() / width, 0..width), &flags, 0.9);
         assert_ne!(flags[8].load(Ordering::Relaxed) & FOREGROUND_BORDER, 0);
         assert_eq!(flags[7].load(Ordering::Relaxed), 0);
     }

@@ -5,6 +5,7 @@ use super::aggregate::{AggregationInput, BAND_ROWS, Band, Placement};
 use super::assemble::Assembly;
 use super::border::mark_borders;
 use super::params::{MAX_LEVELS, MapParams};
+use super::region::ImageRegion;
 use crate::frame::{FrameError, RayTable, RgbdFrame};
 use crate::geometry::{CameraError, Pose};
 use nalgebra::Vector3;
@@ -108,7 +109,21 @@ impl MapBuilder {
     /// Builds `map` from `frame`, replacing its content. Allocates nothing once the
     /// builder has seen a frame of this camera.
     pub fn build(&mut self, frame: &RgbdFrame, map: &mut SurfelMap) -> Result<BuildReport, MapError> {
-        self.aggregate(frame, &map.params, None)?;
+        let region = ImageRegion::whole(frame.width(), frame.height());
+        self.build_region(frame, &region, map)
+    }
+
+    /// Builds `map` from the pixels of `region` only (paper §5.2: the tracker's scene map
+    /// covers the volume of interest around the object). The region's edges count as
+    /// image borders (§3.4). Allocates nothing once the builder has seen a frame of this
+    /// camera.
+    pub fn build_region(
+        &mut self,
+        frame: &RgbdFrame,
+        region: &ImageRegion,
+        map: &mut SurfelMap,
+    ) -> Result<BuildReport, MapError> {
+        self.aggregate(frame, &map.params, None, region)?;
         let bands = &self.bands[..self.active_bands];
         let dropped = self.assembly.assemble(bands, map);
         Ok(report(bands, map, dropped))
@@ -130,7 +145,8 @@ impl MapBuilder {
             let r = view.map_from_camera.rotation.to_rotation_matrix().into_inner().cast::<f32>();
             let t = view.map_from_camera.translation.vector.cast::<f32>();
             let placement = Placement { rotation: r, translation: t, keep };
-            self.aggregate(view.frame, &map.params, Some(placement))?;
+            let whole = ImageRegion::whole(view.frame.width(), view.frame.height());
+            self.aggregate(view.frame, &map.params, Some(placement), &whole)?;
             fused.extend(self.bands[..self.active_bands].iter().filter(|b| !b.aggregates.is_empty()).cloned());
         }
         if fused.is_empty() {
@@ -146,6 +162,7 @@ impl MapBuilder {
         frame: &RgbdFrame,
         params: &MapParams,
         placement: Option<Placement>,
+        region: &ImageRegion,
     ) -> Result<(), MapError> {
         let (width, height) = (frame.width(), frame.height());
         if width > self.max_width || height > self.max_height {
@@ -157,13 +174,15 @@ impl MapBuilder {
             });
         }
         self.rays.ensure(&frame.camera)?;
-        self.configure_bands(width, height);
-        let pixels = width * height;
-        let flags = &self.flags[..pixels];
-        flags.par_chunks(4096).for_each(|c| c.iter().for_each(|f| f.store(0, Ordering::Relaxed)));
-        mark_borders(frame.depth, self.rays.rays(), width, flags, params.depth_jump_ratio as f32);
+        let (rows, cols) = region.clipped(width, height);
+        self.configure_bands(width, rows.clone());
+        let flags = &self.flags[..width * height];
+        let region_flags = &flags[rows.start * width..rows.end * width];
+        region_flags.par_chunks(4096).for_each(|c| c.iter().for_each(|f| f.store(0, Ordering::Relaxed)));
+        let jump = params.depth_jump_ratio as f32;
+        mark_borders(frame.depth, self.rays.rays(), width, (rows, cols.clone()), flags, jump);
         if !params.mark_foreground_borders {
-            flags.par_chunks(4096).for_each(|c| {
+            region_flags.par_chunks(4096).for_each(|c| {
                 c.iter().for_each(|f| {
                     f.fetch_and(!super::border::FOREGROUND_BORDER, Ordering::Relaxed);
                 })
@@ -182,15 +201,20 @@ impl MapBuilder {
             num_levels: params.num_levels,
             smooth_view_dirs: params.smooth_view_dirs,
             placement,
+            cols,
+            gate: region.gate.as_ref(),
         };
         self.bands[..self.active_bands].par_iter_mut().for_each(|b| b.aggregate(&input));
         Ok(())
     }
 
-    fn configure_bands(&mut self, width: usize, height: usize) {
-        self.active_bands = height.div_ceil(BAND_ROWS);
+    /// Cuts `rows` into bands of `BAND_ROWS` from its first row. Band `b` was sized for
+    /// rows `b·BAND_ROWS..` of the largest image, and gets no more rows than that.
+    fn configure_bands(&mut self, width: usize, rows: std::ops::Range<usize>) {
+        self.active_bands = rows.len().div_ceil(BAND_ROWS);
         for (b, band) in self.bands.iter_mut().enumerate().take(self.active_bands) {
-            band.configure(b * BAND_ROWS..((b + 1) * BAND_ROWS).min(height), width);
+            let start = rows.start + b * BAND_ROWS;
+            band.configure(start..(start + BAND_ROWS).min(rows.end), width);
         }
     }
 }

@@ -189,3 +189,22 @@ pub fn load(path: &Path) -> Result<Model, ModelError> {
     let bytes = std::fs::read(path).map_err(|source| ModelError::Io { path: path.to_path_buf(), source })?;
     decode(&bytes, path)
 }
+
+impl Model {
+    /// The model's point distribution and volume of interest, for gating pixels when
+    /// tracking it (paper §5.2).
+    pub fn extent(&self) -> Result<crate::tracking::ModelExtent, crate::tracking::ExtentError> {
+        let r = &self.header.root;
+        let [xx, xy, xz, yy, yz, zz] = r.covariance;
+        let covariance = nalgebra::Matrix3::new(xx, xy, xz, xy, yy, yz, xz, yz, zz);
+        let volume = self.header.volume.as_ref().map(|v| &v.shape);
+        crate::tracking::ModelExtent::new(nalgebra::Vector3::from(r.mean), covariance, volume)
+    }
+
+    /// `world_from_model` of the header as a pose.
+    pub fn world_from_model(&self) -> crate::geometry::Pose {
+        let [tx, ty, tz, qx, qy, qz, qw] = self.header.world_from_model;
+        let q = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(qw, qx, qy, qz));
+        crate::geometry::Pose::from_parts(nalgebra::Translation3::new(tx, ty, tz), q)
+    }
+}

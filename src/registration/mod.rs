@@ -18,9 +18,11 @@
 mod associate;
 mod cost;
 mod evaluate;
+pub mod likelihood;
 pub mod params;
 mod workspace;
 
+pub use likelihood::{MatchScore, MatchScratch, match_score};
 pub use params::{RegistrationParams, RegistrationParamsError};
 pub use workspace::RegistrationWorkspace;
 

@@ -5,7 +5,6 @@
 
 pub mod fuse;
 pub mod graph;
-pub mod likelihood;
 pub mod params;
 pub mod system;
 pub mod volume;

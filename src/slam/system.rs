@@ -8,12 +8,12 @@
 //! for the tracker loop.
 
 use super::graph::{Edge, EdgeKind, GraphError, PoseGraph};
-use super::likelihood::match_score;
 use super::params::SlamParams;
 use crate::frame::RgbdFrame;
 use crate::geometry::se3::pose_distance;
 use crate::geometry::{CameraModel, Pose};
 use crate::map::{BuildReport, MapBuilder, MapCapacity, MapError, MapParamsError, SurfelMap};
+use crate::registration::match_score;
 use crate::registration::{RegistrationError, RegistrationWorkspace, register};
 use crate::synthetic::Pcg32;
 use nalgebra::Matrix6;
@@ -427,6 +427,16 @@ impl Slam {
             .iter()
             .map(|f| (f.stamp_ns, self.graph.vertices[f.reference] * f.reference_from_camera, f.status))
             .collect()
+    }
+
+    /// Re-expresses the map in another world frame: every key-view pose becomes
+    /// `new_from_old · pose` (relative poses, edges and the trajectory's shape are
+    /// unchanged).
+    pub fn change_world(&mut self, new_from_old: &Pose) {
+        for v in &mut self.graph.vertices {
+            *v = new_from_old * *v;
+        }
+        self.world_from_first = new_from_old * self.world_from_first;
     }
 
     /// The counters.

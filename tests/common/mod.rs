@@ -1,6 +1,8 @@
 //! Shared helpers for the integration tests: cameras, shipped data, rendering, maps.
 #![allow(dead_code)]
 
+pub mod counting_alloc;
+
 use mrsmap::frame::RgbdFrame;
 use mrsmap::geometry::{CameraModel, PinholeIntrinsics, Pose};
 use mrsmap::map::{MapBuilder, MapCapacity, MapParams, SurfelMap};
@@ -93,5 +95,40 @@ pub fn odometry_job(dataset: PathBuf, out: PathBuf, threads: usize) -> mrsmap::a
         max_frames: None,
         qvga: false,
         params: Default::default(),
+    }
+}
+
+/// The `mrsmap` binary built for the tests.
+pub fn mrsmap_bin() -> PathBuf {
+    PathBuf::from(env!("CARGO_BIN_EXE_mrsmap"))
+}
+
+/// A tracker configuration for the shipped teddy model and clip, on services unique to
+/// this test (`tag` and the process id), with extra TOML lines for `[tracker]`.
+pub fn tracker_config_text(tag: &str, tracker: &str) -> String {
+    let id = format!("mrsmap_test_{}_{tag}", std::process::id());
+    format!(
+        "[camera]\nservice = \"{id}/camera\"\n[poses]\nservice = \"{id}/poses\"\n[tracker]\nthreads = 2\n{tracker}\n\
+         [[object]]\nname = \"teddy\"\nmodel = \"{}\"\n\
+         camera_from_object = [0.1915, 0.1014, 1.0290, -0.24997, -0.80681, 0.51676, -0.13977]\n\
+         search_translation_m = 0.05\nsearch_yaw_deg = 20.0\n",
+        root().join("models/teddy.mrsm").display()
+    )
+}
+
+/// Writes [`tracker_config_text`] to `dir/tracker.toml` and returns its path.
+pub fn write_tracker_config(dir: &std::path::Path, tag: &str, tracker: &str) -> PathBuf {
+    let path = dir.join("tracker.toml");
+    std::fs::write(&path, tracker_config_text(tag, tracker)).expect("write config");
+    path
+}
+
+/// Kills a child process when dropped (a failing test leaves no stray process).
+pub struct ChildGuard(pub std::process::Child);
+
+impl Drop for ChildGuard {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
     }
 }

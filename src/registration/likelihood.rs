@@ -1,5 +1,5 @@
-//! How well one map explains another under a pose: the matching score used to
-//! validate loop closures (paper §5.1.1).
+//! How well one map explains another under a pose: the matching score that validates
+//! loop closures (paper §5.1.1) and measures the quality of a tracked pose (§5.2).
 //!
 //! Each usable surfel of `a`, transformed into `b`, is compared with the surfels of `b`
 //! at the same level in the 3×3×3 cells around it whose view direction and normal agree
@@ -34,38 +34,59 @@ pub struct MatchScore {
 }
 
 /// Scores how well `b` explains `a` when `a`'s coordinates are mapped by `b_from_a`.
+/// Allocates a small buffer of partial sums; see [`MatchScratch`] for a version that
+/// does not.
 pub fn match_score(a: &SurfelMap, b: &SurfelMap, b_from_a: &Pose, regularization: f64) -> MatchScore {
-    let r = b_from_a.rotation.to_rotation_matrix().into_inner();
-    let t = b_from_a.translation.vector;
-    let rf = r.cast::<f32>();
-    let partial: Vec<(f64, usize, usize)> = a
-        .surfels()
-        .par_chunks(CHUNK)
-        .zip(a.normals().par_chunks(CHUNK))
-        .map(|(surfels, normals)| {
-            let mut acc = (0.0, 0, 0);
-            for (s, n) in surfels.iter().zip(normals) {
-                if !s.usable() || s.level as usize >= b.num_levels() {
-                    continue;
+    let mut scratch = MatchScratch::new(a.surfels().len());
+    scratch.score(a, b, b_from_a, regularization)
+}
+
+/// Preallocated partial sums for [`match_score`] without allocation.
+#[derive(Debug, Clone, Default)]
+pub struct MatchScratch {
+    partial: Vec<(f64, usize, usize)>,
+}
+
+impl MatchScratch {
+    /// Room for maps of up to `surfels` surfels.
+    pub fn new(surfels: usize) -> Self {
+        MatchScratch { partial: Vec::with_capacity(surfels.div_ceil(CHUNK)) }
+    }
+
+    /// [`match_score`] into the preallocated buffer (it grows if `a` is larger than it
+    /// was sized for). Per-chunk sums are added in chunk order: the result does not
+    /// depend on the number of threads.
+    pub fn score(&mut self, a: &SurfelMap, b: &SurfelMap, b_from_a: &Pose, regularization: f64) -> MatchScore {
+        let r = b_from_a.rotation.to_rotation_matrix().into_inner();
+        let t = b_from_a.translation.vector;
+        let rf = r.cast::<f32>();
+        self.partial.clear();
+        self.partial.resize(a.surfels().len().div_ceil(CHUNK), (0.0, 0, 0));
+        self.partial.par_iter_mut().zip(a.surfels().par_chunks(CHUNK)).zip(a.normals().par_chunks(CHUNK)).for_each(
+            |((acc, surfels), normals)| {
+                *acc = (0.0, 0, 0);
+                for (s, n) in surfels.iter().zip(normals) {
+                    if !s.usable() || s.level as usize >= b.num_levels() {
+                        continue;
+                    }
+                    acc.2 += 1;
+                    let level = s.level as usize;
+                    let res = b.resolution(level);
+                    let reg = Matrix3::identity() * (regularization * res * res);
+                    let p = r * s.mean.cast::<f64>() + t;
+                    let c = r * s.cov() * r.transpose() + reg;
+                    let normal = rf * n;
+                    let best = best_match(b, level, &p, &c, &normal, s.dir, &rf, &reg);
+                    if best < CHI2_FLOOR {
+                        acc.0 += 0.5 * (CHI2_FLOOR - best);
+                        acc.1 += 1;
+                    }
                 }
-                acc.2 += 1;
-                let level = s.level as usize;
-                let res = b.resolution(level);
-                let reg = Matrix3::identity() * (regularization * res * res);
-                let p = r * s.mean.cast::<f64>() + t;
-                let c = r * s.cov() * r.transpose() + reg;
-                let normal = rf * n;
-                let best = best_match(b, level, &p, &c, &normal, s.dir, &rf, &reg);
-                if best < CHI2_FLOOR {
-                    acc.0 += 0.5 * (CHI2_FLOOR - best);
-                    acc.1 += 1;
-                }
-            }
-            acc
-        })
-        .collect();
-    let (total, matched, surfels) = partial.iter().fold((0.0, 0, 0), |a, p| (a.0 + p.0, a.1 + p.1, a.2 + p.2));
-    MatchScore { total, matched, surfels }
+            },
+        );
+        let (total, matched, surfels) = self.partial.iter().fold((0.0, 0, 0), |a, p| (a.0 + p.0, a.1 + p.1, a.2 + p.2));
+        MatchScore { total, matched, surfels }
+    }
 }
 
 /// The smallest Mahalanobis distance to a compatible surfel of `b` near `p`.

@@ -1,0 +1,204 @@
+//! `mrsmap poses`: a control-stack client that reads the tracker's poses, prints them
+//! and optionally writes TUM trajectories — the example a robot integrator copies.
+
+use super::report::percentile;
+use crate::geometry::Pose;
+use crate::io::ipc::{self, IpcError, now_ns};
+use crate::io::tum::{format_pose_line, format_stamp};
+use crate::io::wire::{LAYOUT_VERSION, ObjectPose, status};
+use anyhow::{Context, Result};
+use nalgebra::{Quaternion, Translation3, UnitQuaternion};
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+/// What to do with the poses.
+#[derive(Debug, Clone)]
+pub struct PosesJob {
+    /// The pose service.
+    pub service: String,
+    /// Write `object_from_camera` per object as a TUM trajectory here (with several
+    /// objects, `.<name>` is inserted before the extension).
+    pub out: Option<PathBuf>,
+    /// Stop after this many pose messages.
+    pub count: Option<u64>,
+    /// Stop after this long without a pose.
+    pub timeout: Option<Duration>,
+    /// Print every pose (otherwise only a summary).
+    pub print: bool,
+}
+
+/// What was received.
+#[derive(Debug, Clone, Default)]
+pub struct PosesSummary {
+    /// Pose messages received.
+    pub received: u64,
+    /// Per object name: (tracking, lost, initialising, invalid frame) counts.
+    pub by_status: BTreeMap<String, [u64; 4]>,
+    /// Driver send → pose received (ms).
+    pub latency_ms: Vec<f64>,
+    /// Tracking time reported by the tracker (ms).
+    pub track_ms: Vec<f64>,
+}
+
+/// The pose in a message.
+pub fn camera_from_object(p: &ObjectPose) -> Pose {
+    let [x, y, z, w] = p.rotation_xyzw;
+    let [tx, ty, tz] = p.translation_m;
+    Pose::from_parts(Translation3::new(tx, ty, tz), UnitQuaternion::from_quaternion(Quaternion::new(w, x, y, z)))
+}
+
+/// The object name in a message.
+pub fn object_name(p: &ObjectPose) -> String {
+    let end = p.name.iter().position(|&b| b == 0).unwrap_or(p.name.len());
+    String::from_utf8_lossy(&p.name[..end]).into_owned()
+}
+
+fn status_name(s: u32) -> &'static str {
+    match s {
+        status::TRACKING => "tracking",
+        status::LOST => "LOST",
+        status::INITIALISING => "initialising",
+        status::INVALID_FRAME => "invalid-frame",
+        _ => "unknown",
+    }
+}
+
+/// Reads the tracker's poses until a signal, `count` or `timeout`: waits on the pose
+/// event (no polling), then takes every object's entry whose pose is new.
+pub fn run(job: &PosesJob) -> Result<PosesSummary> {
+    let node = ipc::node("mrsmap_poses")?;
+    let started = Instant::now();
+    let service = loop {
+        match ipc::open_poses(&node, &job.service) {
+            Ok(s) => break s,
+            Err(e) => {
+                if job.timeout.is_some_and(|t| started.elapsed() > t) {
+                    return Err(e).context("no tracker publishes poses there (is `mrsmap track` running?)");
+                }
+                if started.elapsed() < Duration::from_millis(300) {
+                    eprintln!("poses: waiting for the tracker to open {}", job.service);
+                }
+                if node.wait(Duration::from_millis(200)).is_err() {
+                    return Ok(PosesSummary::default());
+                }
+            }
+        }
+    };
+    let events = ipc::events(&node, &job.service)?;
+    let reader = service.reader_builder().create().map_err(|e| IpcError::new("pose reader", e))?;
+    let entries: Vec<_> = (0..ipc::MAX_OBJECTS).map_while(|k| reader.entry::<ObjectPose>(&k).ok()).collect();
+    let listener = events.listener_builder().create().map_err(|e| IpcError::new("pose listener", e))?;
+    let mut seen = vec![0u64; entries.len()];
+    let mut summary = PosesSummary::default();
+    let mut trajectories: BTreeMap<String, String> = BTreeMap::new();
+    let mut last = Instant::now();
+    'outer: loop {
+        listener.timed_wait(|_| {}, Duration::from_millis(200)).map_err(|e| IpcError::new("waiting for poses", e))?;
+        if node.wait(Duration::ZERO).is_err() {
+            break;
+        }
+        for (k, entry) in entries.iter().enumerate() {
+            let pose = *entry.get();
+            if pose.publish_stamp_ns == seen[k] || pose.frame_send_stamp_ns == 0 {
+                continue;
+            }
+            seen[k] = pose.publish_stamp_ns;
+            last = Instant::now();
+            handle(job, &pose, &mut summary, &mut trajectories);
+            if job.count.is_some_and(|c| summary.received >= c) {
+                break 'outer;
+            }
+        }
+        if job.timeout.is_some_and(|t| last.elapsed() > t) {
+            break;
+        }
+    }
+    if let Some(out) = &job.out {
+        write_trajectories(out, &trajectories)?;
+    }
+    Ok(summary)
+}
+
+fn handle(job: &PosesJob, p: &ObjectPose, summary: &mut PosesSummary, trajectories: &mut BTreeMap<String, String>) {
+    if p.layout_version != LAYOUT_VERSION {
+        eprintln!("poses: message with layout version {} ignored (expected {LAYOUT_VERSION})", p.layout_version);
+        return;
+    }
+    summary.received += 1;
+    let name = object_name(p);
+    let latency_ms = now_ns().saturating_sub(p.frame_send_stamp_ns) as f64 * 1e-6;
+    if let Some(c) = summary.by_status.entry(name.clone()).or_default().get_mut(p.status as usize) {
+        *c += 1;
+    }
+    let pose = camera_from_object(p);
+    if p.status != status::INVALID_FRAME {
+        summary.latency_ms.push(latency_ms);
+        summary.track_ms.push(f64::from(p.build_ms + p.register_ms));
+    }
+    if job.print {
+        let t = pose.translation.vector;
+        println!(
+            "{} {:<8} {:<13} camera_from_object t = [{:+.4}, {:+.4}, {:+.4}] m  q = [{:+.4}, {:+.4}, {:+.4}, {:+.4}]  quality {:.2}  track {:.2} ms  latency {:.2} ms",
+            format_stamp(p.frame_stamp_ns),
+            name,
+            status_name(p.status),
+            t.x,
+            t.y,
+            t.z,
+            p.rotation_xyzw[0],
+            p.rotation_xyzw[1],
+            p.rotation_xyzw[2],
+            p.rotation_xyzw[3],
+            p.quality,
+            p.build_ms + p.register_ms,
+            latency_ms
+        );
+    }
+    if job.out.is_some() {
+        let text = trajectories.entry(name).or_default();
+        if p.status == status::TRACKING {
+            let _ = writeln!(text, "{}", format_pose_line(p.frame_stamp_ns, &pose.inverse()));
+        } else {
+            let _ = writeln!(text, "# {} {}", format_stamp(p.frame_stamp_ns), status_name(p.status));
+        }
+    }
+}
+
+fn write_trajectories(out: &Path, trajectories: &BTreeMap<String, String>) -> Result<()> {
+    for (name, lines) in trajectories {
+        let path = if trajectories.len() == 1 { out.to_path_buf() } else { with_suffix(out, name) };
+        let text = format!(
+            "# mrsmap poses: object_from_camera of '{name}' (the camera in the object frame), stamped with the frames' depth timestamps\n# timestamp tx ty tz qx qy qz qw\n{lines}"
+        );
+        std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(())
+}
+
+/// `dir/traj.txt` + `teddy` → `dir/traj.teddy.txt`.
+pub fn with_suffix(path: &Path, name: &str) -> PathBuf {
+    let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    let file = match path.extension() {
+        Some(ext) => format!("{stem}.{name}.{}", ext.to_string_lossy()),
+        None => format!("{stem}.{name}"),
+    };
+    path.with_file_name(file)
+}
+
+/// Prints the summary.
+pub fn print_summary(s: &PosesSummary) {
+    println!("poses: {} messages", s.received);
+    for (name, c) in &s.by_status {
+        println!("  {name}: {} tracking, {} lost, {} initialising, {} invalid frames", c[0], c[1], c[2], c[3]);
+    }
+    if !s.latency_ms.is_empty() {
+        println!(
+            "  tracking per frame: median {:.2} ms; driver send → pose received: median {:.2} ms, p99 {:.2} ms",
+            percentile(&s.track_ms, 0.5),
+            percentile(&s.latency_ms, 0.5),
+            percentile(&s.latency_ms, 0.99)
+        );
+    }
+}

@@ -1,0 +1,160 @@
+//! `mrsmap track --dataset`: the tracker's per-frame step over a recorded TUM sequence
+//! (every frame, no drops), with the accuracy against ground truth when it exists.
+
+use super::dataset::thread_pool;
+use super::poses_client::with_suffix;
+use super::report::{percentile, progress_bar};
+use super::tracking::{StepOutput, invalid_frame, load_tracker, track_frame};
+use crate::eval::{ErrorStats, align_rigid};
+use crate::geometry::Pose;
+use crate::io::camera_file::read_camera;
+use crate::io::frames::FrameLoader;
+use crate::io::tracker_config::TrackerConfig;
+use crate::io::tum::{TumDataset, format_stamp, write_trajectory};
+use crate::model::load;
+use crate::tracking::TrackingStatus;
+use anyhow::{Context, Result, bail};
+use std::path::PathBuf;
+
+/// What to run.
+#[derive(Debug, Clone)]
+pub struct TrackDatasetJob {
+    /// Dataset folder (TUM layout).
+    pub dataset: PathBuf,
+    /// Camera file of the dataset.
+    pub camera: PathBuf,
+    /// Skip this many frames.
+    pub first_frame: usize,
+    /// Use at most this many frames.
+    pub max_frames: Option<usize>,
+    /// Halve images and intrinsics on load.
+    pub qvga: bool,
+    /// Start every object at its ground-truth pose (from the dataset's ground truth and
+    /// the model's `world_from_model`) instead of the configured one.
+    pub start_at_ground_truth: bool,
+    /// Write each object's `object_from_camera` trajectory here.
+    pub trajectory: Option<PathBuf>,
+}
+
+/// Per-object results.
+#[derive(Debug, Clone)]
+pub struct ObjectResult {
+    /// Name.
+    pub name: String,
+    /// Frames per status (tracking, lost, initialising, invalid).
+    pub statuses: [usize; 4],
+    /// Tracking time per frame (ms).
+    pub track_ms: Vec<f64>,
+    /// Position error of the camera in the object frame after rigid alignment of the
+    /// whole trajectory to the ground truth (the TUM ATE; the paper's measure).
+    pub ate: Option<ErrorStats>,
+    /// Position error without alignment, through the model's `world_from_model`.
+    pub raw: Option<ErrorStats>,
+}
+
+/// Tracks every object through the dataset.
+pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<Vec<ObjectResult>> {
+    let camera = read_camera(&job.camera)?;
+    let dataset =
+        TumDataset::open(&job.dataset).with_context(|| format!("opening dataset {}", job.dataset.display()))?;
+    let mut frames: Vec<_> = dataset.frames.iter().skip(job.first_frame).cloned().collect();
+    if let Some(n) = job.max_frames {
+        frames.truncate(n);
+    }
+    if frames.is_empty() {
+        bail!("no frames to track (the dataset has {}, --first-frame {})", dataset.frames.len(), job.first_frame);
+    }
+    let mut loader = FrameLoader::new(camera, job.qvga);
+    let cam = loader.camera();
+    let mut tracker = load_tracker(config, cam.width as usize, cam.height as usize)?;
+    let world_from_model: Vec<Pose> =
+        config.objects.iter().map(|o| load(&o.model).map(|m| m.world_from_model())).collect::<Result<_, _>>()?;
+    let gt_at = |stamp_ns: u64| dataset.groundtruth.as_ref().and_then(|g| g.interpolate(stamp_ns as f64 * 1e-9, 0.05));
+    if job.start_at_ground_truth {
+        let world_from_camera =
+            gt_at(frames[0].depth_stamp_ns).context("--start-at-ground-truth: no ground truth at the first frame")?;
+        for (k, w) in world_from_model.iter().enumerate() {
+            tracker.reinitialise(k, &(world_from_camera.inverse() * w));
+        }
+    }
+    let pool = thread_pool(config.threads)?;
+    let mut out = StepOutput::new(tracker.len());
+    let mut results: Vec<ObjectResult> = tracker
+        .names()
+        .iter()
+        .map(|n| ObjectResult { name: n.clone(), statuses: [0; 4], track_ms: vec![], ate: None, raw: None })
+        .collect();
+    let mut tracked: Vec<Vec<(u64, Pose)>> = vec![Vec::new(); tracker.len()];
+    let bar = progress_bar(frames.len() as u64, "tracking");
+    for entry in &frames {
+        bar.inc(1);
+        match loader.load(entry) {
+            Ok(frame) => track_frame(&mut tracker, &pool, &frame, &mut out),
+            Err(e) => {
+                bar.suspend(|| eprintln!("warning: frame {}: {e}", format_stamp(entry.depth_stamp_ns)));
+                invalid_frame(&tracker, entry.depth_stamp_ns, &mut out);
+            }
+        }
+        for (k, r) in results.iter_mut().enumerate() {
+            let e = &out.estimates[k];
+            r.statuses[e.status as usize] += 1;
+            if e.status != TrackingStatus::InvalidFrame {
+                r.track_ms.push(f64::from(out.build_ms[k] + out.register_ms[k]));
+            }
+            if e.status == TrackingStatus::Tracking {
+                tracked[k].push((entry.depth_stamp_ns, e.camera_from_object.inverse()));
+            }
+        }
+    }
+    bar.finish_and_clear();
+    for (k, r) in results.iter_mut().enumerate() {
+        let pairs: Vec<(Pose, Pose)> = tracked[k]
+            .iter()
+            .filter_map(|(s, est)| gt_at(*s).map(|g| (*est, world_from_model[k].inverse() * g)))
+            .collect();
+        if pairs.len() >= 3 {
+            let x: Vec<_> = pairs.iter().map(|p| p.0.translation.vector).collect();
+            let y: Vec<_> = pairs.iter().map(|p| p.1.translation.vector).collect();
+            let (rot, t) = align_rigid(&x, &y);
+            r.ate =
+                Some(ErrorStats::of(&x.iter().zip(&y).map(|(a, b)| (b - (rot * a + t)).norm()).collect::<Vec<_>>()));
+            r.raw = Some(ErrorStats::of(&x.iter().zip(&y).map(|(a, b)| (b - a).norm()).collect::<Vec<_>>()));
+        }
+        if let Some(path) = &job.trajectory {
+            let path = if config.objects.len() == 1 { path.clone() } else { with_suffix(path, &r.name) };
+            let header = format!(
+                "mrsmap track: object_from_camera of '{}' (frames where it was tracked), stamped with depth timestamps\ndataset {}",
+                r.name,
+                job.dataset.display()
+            );
+            write_trajectory(&path, &header, &tracked[k])?;
+        }
+    }
+    Ok(results)
+}
+
+/// Prints the results.
+pub fn print_summary(results: &[ObjectResult]) {
+    for r in results {
+        let [t, l, i, v] = r.statuses;
+        println!("{}: {t} frames tracking, {l} lost, {i} initialising, {v} invalid", r.name);
+        if !r.track_ms.is_empty() {
+            println!(
+                "  tracking time per frame: median {:.2} ms, p99 {:.2} ms",
+                percentile(&r.track_ms, 0.5),
+                percentile(&r.track_ms, 0.99)
+            );
+        }
+        if let (Some(a), Some(raw)) = (&r.ate, &r.raw) {
+            println!(
+                "  camera position error vs ground truth ({} frames): ATE (aligned) median {:.1} mm, max {:.1} mm, RMSE {:.1} mm; unaligned (model frame from the map) median {:.1} mm, max {:.1} mm",
+                a.count,
+                a.median * 1e3,
+                a.max * 1e3,
+                a.rmse * 1e3,
+                raw.median * 1e3,
+                raw.max * 1e3
+            );
+        }
+    }
+}

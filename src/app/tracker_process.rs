@@ -1,0 +1,284 @@
+//! `mrsmap track`: the robot-side tracker process. RGB-D frames arrive over iceoryx2
+//! shared memory; each object's pose is written to the pose blackboard. Everything is
+//! allocated at start-up; the loop blocks on the camera's event (no polling), takes the
+//! newest frame, runs the tracker step and publishes, without allocating.
+//!
+//! It waits on the camera's listener directly rather than on a `WaitSet`: iceoryx2
+//! 0.10's `WaitSet` allocates two small vectors on every wake-up (measured), the
+//! listener's timed wait none. The wait times out every 250 ms to notice signals and an
+//! idle camera.
+
+use super::report::percentile;
+use super::tracking::{StepOutput, invalid_frame, load_tracker, pose_message, track_frame};
+use crate::io::ipc::{self, FrameSize, Ipc, IpcError, now_ns};
+use crate::io::tracker_config::TrackerConfig;
+use crate::io::wire::{ObjectPose, RgbdFrameQvga, RgbdFrameVga, WireFrame};
+use crate::tracking::Tracker;
+use anyhow::{Context, Result};
+use iceoryx2::node::Node;
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::port::writer::{EntryHandleMut, Writer};
+use iceoryx2::service::port_factory::blackboard;
+use std::time::{Duration, Instant};
+
+/// When to stop (besides SIGINT/SIGTERM).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct RunLimits {
+    /// Stop after this many frames.
+    pub max_frames: Option<u64>,
+    /// Stop after this long without a frame.
+    pub idle_timeout: Option<Duration>,
+}
+
+/// Why the loop ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StopReason {
+    /// SIGINT or SIGTERM.
+    Signal,
+    /// `max_frames` reached.
+    FrameLimit,
+    /// No frame within `idle_timeout`.
+    Idle,
+}
+
+/// What a run did.
+#[derive(Debug, Clone)]
+pub struct RunSummary {
+    /// Frames processed.
+    pub frames: u64,
+    /// Frames refused (wrong size or version, bad intrinsics, no depth).
+    pub invalid_frames: u64,
+    /// Frames that were overwritten by newer ones before the tracker took them.
+    pub skipped_frames: u64,
+    /// Why it stopped.
+    pub stop: StopReason,
+    /// Tracking time per frame and object (ms), the last ≤ `RING` frames, object 0.
+    pub track_ms: Vec<f64>,
+    /// Driver send → poses published (ms), same frames.
+    pub latency_ms: Vec<f64>,
+}
+
+/// What the observer sees after each frame (tests use it to arm counters).
+#[derive(Debug)]
+pub struct FrameEvent<'a> {
+    /// Frames processed so far, this one included.
+    pub frames: u64,
+    /// The frame was refused.
+    pub invalid: bool,
+    /// The estimates and timings.
+    pub output: &'a StepOutput,
+}
+
+const RING: usize = 100_000;
+
+/// A running tracker for frames of type `F`.
+pub struct LiveTracker<F: WireFrame> {
+    node: Node<Ipc>,
+    listener: Listener<Ipc>,
+    core: Core<F>,
+}
+
+/// The part of the process the loop changes (apart from the listener the WaitSet holds).
+struct Core<F: WireFrame> {
+    tracker: Tracker,
+    pool: rayon::ThreadPool,
+    out: StepOutput,
+    names: Vec<String>,
+    subscriber: Subscriber<Ipc, F, ()>,
+    entries: Vec<EntryHandleMut<Ipc, u32, ObjectPose>>,
+    notifier: Notifier<Ipc>,
+    _writer: Writer<Ipc, u32>,
+    _poses: blackboard::PortFactory<Ipc, u32>,
+    track_ms: Vec<f64>,
+    latency_ms: Vec<f64>,
+    last_sequence: Option<u64>,
+}
+
+impl<F: WireFrame> LiveTracker<F> {
+    /// Loads the models, allocates the tracker and opens the ports. The calling thread
+    /// becomes one of the tracker's worker threads: call [`LiveTracker::run`] on it.
+    pub fn start(config: &TrackerConfig) -> Result<Self> {
+        let tracker = load_tracker(config, F::WIDTH as usize, F::HEIGHT as usize)?;
+        // The calling thread joins the pool as worker 0, so that the parallel work it
+        // starts each frame is not injected from outside (rayon allocates for that).
+        // `run` must be called on this thread.
+        let mut pool = rayon::ThreadPoolBuilder::new().use_current_thread();
+        if let Some(t) = config.threads {
+            pool = pool.num_threads(t);
+        }
+        let pool = pool.build().context("starting the thread pool")?;
+        let node = ipc::node("mrsmap_tracker")?;
+        let frames_name = config.frame_size.service(&config.camera_service);
+        let frames = ipc::frames::<F>(&node, &frames_name)?;
+        let frame_events = ipc::events(&node, &frames_name)?;
+        let names = tracker.names().to_vec();
+        let out = StepOutput::new(tracker.len());
+        let initial: Vec<ObjectPose> =
+            (0..tracker.len()).map(|k| pose_message(&names[k], &out, k, (0, 0), 0.0)).collect();
+        let poses = ipc::create_poses(&node, &config.poses_service, &initial)?;
+        let pose_events = ipc::events(&node, &config.poses_service)?;
+        let err = |what: &str, e: &dyn std::fmt::Debug| IpcError::new(format!("{what} on {frames_name}"), e);
+        let subscriber = frames.subscriber_builder().create().map_err(|e| err("subscriber", &e))?;
+        let listener = frame_events.listener_builder().create().map_err(|e| err("listener", &e))?;
+        let writer = poses.writer_builder().create().map_err(|e| err("pose writer", &e))?;
+        let entries = (0..tracker.len() as u32)
+            .map(|k| writer.entry::<ObjectPose>(&k).map_err(|e| err("pose entry", &e)))
+            .collect::<Result<Vec<_>, _>>()?;
+        let notifier = pose_events.notifier_builder().create().map_err(|e| err("pose notifier", &e))?;
+        let core = Core {
+            out,
+            tracker,
+            pool,
+            names,
+            subscriber,
+            entries,
+            notifier,
+            _writer: writer,
+            _poses: poses,
+            track_ms: Vec::with_capacity(RING),
+            latency_ms: Vec::with_capacity(RING),
+            last_sequence: None,
+        };
+        Ok(LiveTracker { node, listener, core })
+    }
+
+    /// The loop: wait for a frame, track, publish; until a signal or a limit.
+    pub fn run(&mut self, limits: &RunLimits, observer: &mut dyn FnMut(&FrameEvent)) -> Result<RunSummary> {
+        let mut summary = RunSummary {
+            frames: 0,
+            invalid_frames: 0,
+            skipped_frames: 0,
+            stop: StopReason::Signal,
+            track_ms: Vec::new(),
+            latency_ms: Vec::new(),
+        };
+        let mut last_frame = Instant::now();
+        let mut waiting_reported = false;
+        loop {
+            // Blocks until the driver notifies (or 250 ms pass); no polling.
+            self.listener
+                .timed_wait(|_| {}, Duration::from_millis(250))
+                .map_err(|e| IpcError::new("waiting for frames", e))?;
+            if self.node.wait(Duration::ZERO).is_err() {
+                summary.stop = StopReason::Signal;
+                break;
+            }
+            if self.core.process_newest(&mut summary, observer)? {
+                last_frame = Instant::now();
+                waiting_reported = false;
+                if limits.max_frames.is_some_and(|m| summary.frames >= m) {
+                    summary.stop = StopReason::FrameLimit;
+                    break;
+                }
+            } else if last_frame.elapsed() > Duration::from_secs(2) && !waiting_reported {
+                eprintln!("tracker: no frame for 2 s (is the camera driver running?); waiting");
+                waiting_reported = true;
+            }
+            if limits.idle_timeout.is_some_and(|t| last_frame.elapsed() > t) {
+                summary.stop = StopReason::Idle;
+                break;
+            }
+        }
+        summary.track_ms = self.core.track_ms.clone();
+        summary.latency_ms = self.core.latency_ms.clone();
+        Ok(summary)
+    }
+
+    /// The node (to list or clean up services).
+    pub fn node(&self) -> &Node<Ipc> {
+        &self.node
+    }
+}
+
+impl<F: WireFrame> Core<F> {
+    /// Takes the newest frame (older ones are dropped), tracks and publishes. Returns
+    /// whether there was a frame.
+    fn process_newest(&mut self, summary: &mut RunSummary, observer: &mut dyn FnMut(&FrameEvent)) -> Result<bool> {
+        let mut newest = None;
+        while let Some(sample) = self.subscriber.receive().map_err(|e| IpcError::new("receiving a frame", e))? {
+            if newest.is_some() {
+                summary.skipped_frames += 1;
+            }
+            newest = Some(sample);
+        }
+        let Some(sample) = newest else { return Ok(false) };
+        let received = Instant::now();
+        let message = sample.payload();
+        let header = *message.header();
+        if let Some(last) = self.last_sequence
+            && header.sequence > last + 1
+        {
+            summary.skipped_frames += header.sequence - last - 1;
+        }
+        self.last_sequence = Some(header.sequence);
+        let invalid = match message.frame() {
+            Ok(frame) => {
+                track_frame(&mut self.tracker, &self.pool, &frame, &mut self.out);
+                false
+            }
+            Err(e) => {
+                if summary.invalid_frames == 0 {
+                    eprintln!(
+                        "tracker: frame {} refused: {e} (reported as invalid; further ones are counted)",
+                        header.sequence
+                    );
+                }
+                invalid_frame(&self.tracker, header.capture_stamp_ns, &mut self.out);
+                summary.invalid_frames += 1;
+                true
+            }
+        };
+        drop(sample);
+        let total_ms = received.elapsed().as_secs_f32() * 1e3;
+        for (k, entry) in self.entries.iter().enumerate() {
+            entry.update_with_copy(pose_message(
+                &self.names[k],
+                &self.out,
+                k,
+                (header.sequence, header.send_stamp_ns),
+                total_ms,
+            ));
+        }
+        self.notifier.notify().map_err(|e| IpcError::new("notifying pose subscribers", e))?;
+        summary.frames += 1;
+        if !invalid && self.track_ms.len() < RING {
+            self.track_ms.push(f64::from(self.out.build_ms[0] + self.out.register_ms[0]));
+            self.latency_ms.push((now_ns().saturating_sub(header.send_stamp_ns)) as f64 * 1e-6);
+        }
+        observer(&FrameEvent { frames: summary.frames, invalid, output: &self.out });
+        Ok(true)
+    }
+}
+
+/// Runs the tracker process described by `config` until SIGINT/SIGTERM or a limit.
+pub fn run(config: &TrackerConfig, limits: &RunLimits) -> Result<RunSummary> {
+    match config.frame_size {
+        FrameSize::Vga => LiveTracker::<RgbdFrameVga>::start(config)?.run(limits, &mut |_| {}),
+        FrameSize::Qvga => LiveTracker::<RgbdFrameQvga>::start(config)?.run(limits, &mut |_| {}),
+    }
+}
+
+/// Prints the summary of a run.
+pub fn print_summary(config: &TrackerConfig, s: &RunSummary) {
+    let why = match s.stop {
+        StopReason::Signal => "stopped by signal",
+        StopReason::FrameLimit => "frame limit reached",
+        StopReason::Idle => "no frames (idle timeout)",
+    };
+    println!(
+        "tracker: {} frames ({} refused as invalid, {} dropped as stale), {why}",
+        s.frames, s.invalid_frames, s.skipped_frames
+    );
+    if !s.track_ms.is_empty() {
+        println!(
+            "  tracking '{}' per frame: median {:.2} ms, p99 {:.2} ms; driver send → poses published: median {:.2} ms, p99 {:.2} ms",
+            config.objects[0].name,
+            percentile(&s.track_ms, 0.5),
+            percentile(&s.track_ms, 0.99),
+            percentile(&s.latency_ms, 0.5),
+            percentile(&s.latency_ms, 0.99)
+        );
+    }
+}

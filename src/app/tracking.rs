@@ -1,0 +1,112 @@
+//! What the live tracker process and the offline runs share: loading the configured
+//! models into a [`Tracker`], and the timed per-frame step.
+
+use crate::frame::RgbdFrame;
+use crate::io::tracker_config::TrackerConfig;
+use crate::io::wire::{self, ObjectPose};
+use crate::model::load;
+use crate::tracking::{ObjectModel, PoseEstimate, Tracker};
+use anyhow::{Context, Result};
+use std::time::Instant;
+
+/// Loads every configured model (clear errors naming the file) and allocates the
+/// tracker for frames up to `max_width × max_height`.
+pub fn load_tracker(config: &TrackerConfig, max_width: usize, max_height: usize) -> Result<Tracker> {
+    let mut models = Vec::with_capacity(config.objects.len());
+    for o in &config.objects {
+        let model = load(&o.model).with_context(|| format!("loading the model of object '{}'", o.name))?;
+        let extent = model.extent().with_context(|| format!("model {} cannot be tracked", o.model.display()))?;
+        models.push(ObjectModel {
+            name: o.name.clone(),
+            map: model.map,
+            extent,
+            initial_camera_from_object: o.camera_from_object,
+            search: o.search,
+        });
+    }
+    Ok(Tracker::new(config.params, max_width, max_height, models)?)
+}
+
+/// The output of one frame, preallocated for every object.
+#[derive(Debug, Clone)]
+pub struct StepOutput {
+    /// Estimate per object.
+    pub estimates: Vec<PoseEstimate>,
+    /// Scene-map building time per object (ms).
+    pub build_ms: Vec<f32>,
+    /// Registration (and quality) time per object (ms).
+    pub register_ms: Vec<f32>,
+}
+
+impl StepOutput {
+    /// Room for `objects` objects.
+    pub fn new(objects: usize) -> Self {
+        StepOutput {
+            estimates: (0..objects).map(PoseEstimate::empty).collect(),
+            build_ms: vec![0.0; objects],
+            register_ms: vec![0.0; objects],
+        }
+    }
+}
+
+/// The tracker's two stages for every object on `frame`, timed (paper §5.2). Runs the
+/// parallel work inside `pool` (so that rayon allocates nothing) and allocates nothing.
+pub fn track_frame(tracker: &mut Tracker, pool: &rayon::ThreadPool, frame: &RgbdFrame, out: &mut StepOutput) {
+    pool.install(|| {
+        for k in 0..tracker.len() {
+            let t0 = Instant::now();
+            let built = tracker.build_scene(k, frame);
+            let t1 = Instant::now();
+            out.estimates[k] = match built {
+                Ok(_) => tracker.register_object(k, frame.stamp_ns),
+                Err(_) => tracker.invalid_frame(k, frame.stamp_ns),
+            };
+            out.build_ms[k] = (t1 - t0).as_secs_f32() * 1e3;
+            out.register_ms[k] = t1.elapsed().as_secs_f32() * 1e3;
+        }
+    });
+}
+
+/// Marks every object's estimate for an unusable frame.
+pub fn invalid_frame(tracker: &Tracker, stamp_ns: u64, out: &mut StepOutput) {
+    for k in 0..tracker.len() {
+        out.estimates[k] = tracker.invalid_frame(k, stamp_ns);
+        out.build_ms[k] = 0.0;
+        out.register_ms[k] = 0.0;
+    }
+}
+
+/// The wire message of object `k`'s estimate.
+pub fn pose_message(name: &str, out: &StepOutput, k: usize, frame: (u64, u64), total_ms: f32) -> ObjectPose {
+    let e = &out.estimates[k];
+    let t = e.camera_from_object.translation.vector;
+    let q = e.camera_from_object.rotation.quaternion();
+    let mut covariance = [0.0; 36];
+    for (i, c) in covariance.iter_mut().enumerate() {
+        *c = e.covariance_ros[(i / 6, i % 6)];
+    }
+    let mut name_bytes = [0u8; 32];
+    let n = name.len().min(31);
+    name_bytes[..n].copy_from_slice(&name.as_bytes()[..n]);
+    ObjectPose {
+        layout_version: wire::LAYOUT_VERSION,
+        object_id: k as u32,
+        frame_stamp_ns: e.stamp_ns,
+        frame_sequence: frame.0,
+        frame_send_stamp_ns: frame.1,
+        publish_stamp_ns: crate::io::ipc::now_ns(),
+        translation_m: [t.x, t.y, t.z],
+        rotation_xyzw: [q.i, q.j, q.k, q.w],
+        covariance,
+        quality: e.quality,
+        status: e.status as u32,
+        bad_frames: e.bad_frames,
+        associations: e.associations as u32,
+        iterations: e.iterations as u32,
+        build_ms: out.build_ms[k],
+        register_ms: out.register_ms[k],
+        total_ms,
+        reserved: 0,
+        name: name_bytes,
+    }
+}

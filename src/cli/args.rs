@@ -1,0 +1,240 @@
+//! The arguments of each subcommand (their doc comments are the `--help` text).
+
+use clap::{Args, Subcommand};
+use mrsmap::app;
+use std::path::PathBuf;
+
+#[derive(Args)]
+pub struct OdometryArgs {
+    /// Dataset folder in TUM layout (rgb/, depth/, rgb.txt + depth.txt or associations.txt,
+    /// optional groundtruth.txt).
+    #[arg(long)]
+    pub dataset: PathBuf,
+    /// Camera file, e.g. robot_config/cameras/tum_fr1.toml.
+    #[arg(long)]
+    pub camera: PathBuf,
+    /// Output trajectory (TUM format: stamp tx ty tz qx qy qz qw).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Also write per-frame timings: stamp,build_ms,register_ms,associations,iterations.
+    #[arg(long)]
+    pub timings: Option<PathBuf>,
+    /// Worker threads [default: all cores]. Results are identical for any count.
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Process at most this many frames.
+    #[arg(long)]
+    pub max_frames: Option<usize>,
+    /// Halve images and intrinsics on load (QVGA from VGA data).
+    #[arg(long)]
+    pub qvga: bool,
+    /// Resolution factor λ of the map: the finest cell at distance r is about 2·λ·r²
+    /// (paper §3.3). Smaller values use finer cells nearby: more accurate, slower.
+    #[arg(long, default_value_t = 0.01)]
+    pub lambda: f64,
+}
+
+#[derive(Args)]
+pub struct MapArgs {
+    /// Dataset folder in TUM layout (groundtruth.txt, if present, gives the first pose
+    /// and the ATE in the summary).
+    #[arg(long)]
+    pub dataset: PathBuf,
+    /// Camera file, e.g. robot_config/cameras/tum_fr3.toml.
+    #[arg(long)]
+    pub camera: PathBuf,
+    /// Object description with the volume of interest, e.g. robot_config/objects/teddy.toml.
+    /// Without it the whole scene is modelled in the world frame.
+    #[arg(long)]
+    pub object: Option<PathBuf>,
+    /// Model file to write (e.g. models/teddy.mrsm). Written atomically.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Replace --out if it exists.
+    #[arg(long)]
+    pub force: bool,
+    /// Camera trajectory to write (TUM format, world_from_camera, depth timestamps).
+    #[arg(long)]
+    pub trajectory: Option<PathBuf>,
+    /// Worker threads [default: all cores]. Results are identical for any count.
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Use at most this many frames, from the first.
+    #[arg(long)]
+    pub max_frames: Option<usize>,
+    /// Seed of the randomised loop-closure draws.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Resolution factor λ of the maps (finest cell at distance r ≈ 2·λ·r²). The default
+    /// is finer than odometry's 0.01: it halves the bias of coarse cells over the wide
+    /// baselines between key views (ATE on fr3_teddy: 12.0 mm against 14.6 mm).
+    #[arg(long, default_value_t = 0.007)]
+    pub lambda: f64,
+}
+
+#[derive(Args)]
+pub struct CameraArgs {
+    /// Dataset folder in TUM layout.
+    #[arg(long)]
+    pub dataset: PathBuf,
+    /// Camera file of the dataset.
+    #[arg(long)]
+    pub camera: PathBuf,
+    /// Service prefix; the tracker's config names the same (camera.service).
+    #[arg(long, default_value = "mrsmap/camera0")]
+    pub service: String,
+    /// Frames per second (0: as fast as possible).
+    #[arg(long, default_value_t = 30.0)]
+    pub rate: f64,
+    /// Publish 320×240 frames (images and intrinsics halved).
+    #[arg(long)]
+    pub qvga: bool,
+    /// Start over after the last frame, until stopped.
+    #[arg(long = "loop")]
+    pub repeat: bool,
+    /// Skip this many frames at the start.
+    #[arg(long, default_value_t = 0)]
+    pub first_frame: usize,
+    /// Stop after this many frames.
+    #[arg(long)]
+    pub max_frames: Option<u64>,
+}
+
+#[derive(Args)]
+pub struct TrackArgs {
+    /// Tracker configuration, e.g. robot_config/tracker.toml.
+    #[arg(long)]
+    pub config: PathBuf,
+    /// Stop after this many frames (live mode).
+    #[arg(long)]
+    pub max_frames: Option<u64>,
+    /// Stop after this many seconds without a frame (live mode).
+    #[arg(long)]
+    pub idle_timeout: Option<f64>,
+    /// Offline: track every frame of this TUM dataset instead of listening to a camera.
+    #[arg(long)]
+    pub dataset: Option<PathBuf>,
+    /// Offline: camera file of the dataset.
+    #[arg(long, requires = "dataset")]
+    pub camera: Option<PathBuf>,
+    /// Offline: skip this many frames.
+    #[arg(long, default_value_t = 0, requires = "dataset")]
+    pub first_frame: usize,
+    /// Offline: halve images and intrinsics on load.
+    #[arg(long, requires = "dataset")]
+    pub qvga: bool,
+    /// Offline: start at the ground-truth pose (dataset ground truth + the model's
+    /// world_from_model) instead of the configured camera_from_object.
+    #[arg(long, requires = "dataset")]
+    pub start_at_ground_truth: bool,
+    /// Offline: write object_from_camera per object (TUM format).
+    #[arg(long, requires = "dataset")]
+    pub trajectory: Option<PathBuf>,
+}
+
+#[derive(Args)]
+pub struct PosesArgs {
+    /// The pose service (the tracker config's poses.service).
+    #[arg(long, default_value = mrsmap::io::ipc::POSES_SERVICE)]
+    pub service: String,
+    /// Write each object's object_from_camera as a TUM trajectory (tracked frames).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Stop after this many pose messages.
+    #[arg(long)]
+    pub count: Option<u64>,
+    /// Stop after this many seconds without a pose.
+    #[arg(long)]
+    pub timeout: Option<f64>,
+    /// Print only the summary, not every pose.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+#[derive(Subcommand)]
+pub enum ModelCommand {
+    /// Describe a model file: frame, source, parameters, volume, root statistics, surfels.
+    Info {
+        /// Model file.
+        file: PathBuf,
+    },
+    /// Draw a model's surfels in colour (shaded by their normals) into a PNG.
+    Render {
+        /// Model file.
+        file: PathBuf,
+        /// Output PNG.
+        #[arg(long)]
+        out: PathBuf,
+        /// Viewing angle around the model's z axis (degrees) [default: the side most
+        /// surfels face, which is where the camera was].
+        #[arg(long, allow_negative_numbers = true)]
+        azimuth: Option<f64>,
+        /// Viewing angle above the model's xy plane (degrees).
+        #[arg(long, default_value_t = 25.0, allow_negative_numbers = true)]
+        elevation: f64,
+        /// Distance from the model's centre (m) [default: the whole model in view].
+        #[arg(long)]
+        distance: Option<f64>,
+        /// Image width (pixels).
+        #[arg(long, default_value_t = 800)]
+        width: u32,
+        /// Image height (pixels).
+        #[arg(long, default_value_t = 600)]
+        height: u32,
+    },
+}
+
+#[derive(Subcommand)]
+pub enum EvalCommand {
+    /// Relative pose error (translation) at a fixed frame delta.
+    Rpe {
+        /// Reference trajectory (e.g. groundtruth.txt).
+        gt: PathBuf,
+        /// Estimated trajectory.
+        est: PathBuf,
+        /// Frame delta.
+        #[arg(long, default_value_t = 1)]
+        delta: usize,
+        /// Maximum time difference for associating stamps (s).
+        #[arg(long, default_value_t = 0.02)]
+        max_diff: f64,
+    },
+    /// Absolute trajectory error after rigid (Horn) alignment.
+    Ate {
+        /// Reference trajectory (e.g. groundtruth.txt).
+        gt: PathBuf,
+        /// Estimated trajectory.
+        est: PathBuf,
+        /// Maximum time difference for associating stamps (s).
+        #[arg(long, default_value_t = 0.02)]
+        max_diff: f64,
+    },
+}
+
+#[derive(Args)]
+pub struct BenchArgs {
+    /// Dataset folder in TUM layout.
+    #[arg(long)]
+    pub dataset: PathBuf,
+    /// Camera file.
+    #[arg(long)]
+    pub camera: PathBuf,
+    /// Number of frames to use (default: up to 200, all of the teddy sequence).
+    #[arg(long, default_value_t = 200)]
+    pub frames: usize,
+    /// Passes over the frames.
+    #[arg(long, default_value_t = 3)]
+    pub passes: usize,
+    /// Worker threads [default: all cores].
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Image sizes to run.
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "vga,qvga")]
+    pub resolution: Vec<app::bench::Resolution>,
+    /// Key views of the synthetic pose graph whose optimisation step is also timed.
+    #[arg(long, default_value_t = 100)]
+    pub graph_key_views: usize,
+    /// Resolution factor λ of the maps (see `odometry --help`).
+    #[arg(long, default_value_t = 0.01)]
+    pub lambda: f64,
+}

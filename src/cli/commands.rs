@@ -1,0 +1,202 @@
+//! What each subcommand does: build the job from the arguments, run it, print.
+
+use super::args::*;
+use anyhow::Result;
+use mrsmap::app;
+use mrsmap::eval::{ErrorStats, associate, ate_translation, rpe_translation};
+use mrsmap::io::tum::Trajectory;
+
+pub fn print_stats(title: &str, s: &ErrorStats) {
+    println!("{title} ({} pairs/poses)", s.count);
+    println!("  rmse   {:.4} mm", s.rmse * 1e3);
+    println!("  mean   {:.4} mm", s.mean * 1e3);
+    println!("  median {:.4} mm", s.median * 1e3);
+    println!("  std    {:.4} mm", s.std * 1e3);
+    println!("  min    {:.4} mm", s.min * 1e3);
+    println!("  max    {:.4} mm", s.max * 1e3);
+}
+
+/// An optional duration in seconds from the command line.
+pub fn seconds(value: Option<f64>, flag: &str) -> Result<Option<std::time::Duration>> {
+    value
+        .map(|s| {
+            std::time::Duration::try_from_secs_f64(s)
+                .map_err(|_| anyhow::anyhow!("{flag} must be a number of seconds >= 0"))
+        })
+        .transpose()
+}
+
+/// `mrsmap track`: live, or over a dataset.
+pub fn track(a: TrackArgs) -> Result<()> {
+    let config = mrsmap::io::tracker_config::read_tracker_config(&a.config)?;
+    if let Some(dataset) = a.dataset {
+        let camera = a.camera.ok_or_else(|| anyhow::anyhow!("--dataset needs --camera (the dataset's camera file)"))?;
+        let job = app::track_dataset::TrackDatasetJob {
+            dataset,
+            camera,
+            first_frame: a.first_frame,
+            max_frames: a.max_frames.map(|m| m as usize),
+            qvga: a.qvga,
+            start_at_ground_truth: a.start_at_ground_truth,
+            trajectory: a.trajectory,
+        };
+        let results = app::track_dataset::run(&config, &job)?;
+        app::track_dataset::print_summary(&results);
+        return Ok(());
+    }
+    let limits = app::tracker_process::RunLimits {
+        max_frames: a.max_frames,
+        idle_timeout: seconds(a.idle_timeout, "--idle-timeout")?,
+    };
+    let summary = app::tracker_process::run(&config, &limits)?;
+    app::tracker_process::print_summary(&config, &summary);
+    Ok(())
+}
+
+/// Default odometry parameters with the map resolution factor λ.
+pub fn odometry_params(lambda: f64) -> mrsmap::odometry::OdometryParams {
+    mrsmap::odometry::OdometryParams {
+        map: mrsmap::map::MapParams { lambda, ..Default::default() },
+        ..Default::default()
+    }
+}
+
+/// `mrsmap odometry`.
+pub fn odometry(a: OdometryArgs) -> Result<()> {
+    let job = app::odometry::OdometryJob {
+        dataset: a.dataset,
+        camera: a.camera,
+        out: a.out,
+        timings: a.timings,
+        threads: a.threads,
+        max_frames: a.max_frames,
+        qvga: a.qvga,
+        params: odometry_params(a.lambda),
+    };
+    let summary = app::odometry::run(&job)?;
+    app::odometry::print_summary(&job, &summary);
+    Ok(())
+}
+
+/// `mrsmap map`.
+pub fn map(a: MapArgs) -> Result<()> {
+    let mut params = mrsmap::slam::SlamParams { seed: a.seed, ..Default::default() };
+    params.map.lambda = a.lambda;
+    let job = app::mapper::MapJob {
+        dataset: a.dataset,
+        camera: a.camera,
+        object: a.object,
+        out: a.out,
+        force: a.force,
+        trajectory: a.trajectory,
+        threads: a.threads,
+        max_frames: a.max_frames,
+        params,
+    };
+    let summary = app::mapper::run(&job)?;
+    app::mapper::print_summary(&job, &summary);
+    Ok(())
+}
+
+/// `mrsmap model …`.
+pub fn model(command: ModelCommand) -> Result<()> {
+    match command {
+        ModelCommand::Info { file } => print!("{}", app::model_cmd::info(&file)?),
+        ModelCommand::Render { file, out, azimuth, elevation, distance, width, height } => {
+            if width == 0 || height == 0 || width > 8192 || height > 8192 {
+                anyhow::bail!("--width and --height must be 1..=8192 pixels");
+            }
+            let view = app::render::View {
+                azimuth_deg: azimuth,
+                elevation_deg: elevation,
+                distance_m: distance,
+                width,
+                height,
+                ..Default::default()
+            };
+            let drawn = app::model_cmd::render_file(&file, &out, &view)?;
+            println!("{drawn} surfels drawn → {}", out.display());
+        }
+    }
+    Ok(())
+}
+
+/// `mrsmap camera`.
+pub fn camera(a: CameraArgs) -> Result<()> {
+    let job = app::camera_driver::CameraJob {
+        dataset: a.dataset,
+        camera: a.camera,
+        service: a.service,
+        rate_hz: a.rate,
+        qvga: a.qvga,
+        repeat: a.repeat,
+        first_frame: a.first_frame,
+        max_frames: a.max_frames,
+    };
+    let s = app::camera_driver::run(&job)?;
+    eprintln!(
+        "camera: {} frames sent, {} unreadable{}",
+        s.sent,
+        s.unreadable,
+        if s.signalled { ", stopped by signal" } else { "" }
+    );
+    Ok(())
+}
+
+/// `mrsmap poses`.
+pub fn poses(a: PosesArgs) -> Result<()> {
+    let job = app::poses_client::PosesJob {
+        service: a.service,
+        out: a.out,
+        count: a.count,
+        timeout: seconds(a.timeout, "--timeout")?,
+        print: !a.quiet,
+    };
+    let s = app::poses_client::run(&job)?;
+    app::poses_client::print_summary(&s);
+    Ok(())
+}
+
+/// `mrsmap eval …`.
+pub fn eval(command: EvalCommand) -> Result<()> {
+    match command {
+        EvalCommand::Rpe { gt, est, delta, max_diff } => {
+            let (g, e) = (Trajectory::read(&gt)?, Trajectory::read(&est)?);
+            let (r, p) = associate(&g, &e, max_diff)?;
+            let errors = rpe_translation(&r, &p, delta)?;
+            print_stats(&format!("RPE translation, delta {delta} frame(s)"), &ErrorStats::of(&errors));
+        }
+        EvalCommand::Ate { gt, est, max_diff } => {
+            let (g, e) = (Trajectory::read(&gt)?, Trajectory::read(&est)?);
+            let (r, p) = associate(&g, &e, max_diff)?;
+            let errors = ate_translation(&r, &p)?;
+            print_stats("ATE translation after rigid alignment", &ErrorStats::of(&errors));
+        }
+    }
+    Ok(())
+}
+
+/// `mrsmap bench`.
+pub fn bench(a: BenchArgs) -> Result<()> {
+    let job = app::bench::BenchJob {
+        dataset: a.dataset,
+        camera: a.camera,
+        frames: a.frames,
+        passes: a.passes,
+        threads: a.threads,
+        resolutions: a.resolution,
+        graph_key_views: a.graph_key_views,
+        params: odometry_params(a.lambda),
+    };
+    let results = app::bench::run(&job)?;
+    let threads = a.threads.unwrap_or_else(rayon::current_num_threads);
+    app::bench::print(&results, threads);
+    let (edges, ms) = app::bench::graph_step_ms(job.graph_key_views, 50);
+    println!(
+        "\npose-graph step (synthetic, {} key views, {edges} edges, 50 on-line steps): median {:.2} ms, p99 {:.2} ms",
+        job.graph_key_views,
+        app::report::percentile(&ms, 0.5),
+        app::report::percentile(&ms, 0.99)
+    );
+    Ok(())
+}

@@ -1,0 +1,152 @@
+//! The iceoryx2 services every process opens, with one definition of their names and
+//! quality of service (iceoryx2 refuses to connect processes whose QoS differ).
+//!
+//! | service | payload | QoS |
+//! |---|---|---|
+//! | `<camera>/rgbd/vga`, `<camera>/rgbd/qvga` | [`RgbdFrameVga`](super::wire::RgbdFrameVga) / [`RgbdFrameQvga`](super::wire::RgbdFrameQvga) | safe overflow, subscriber buffer 1 (a late subscriber gets the newest frame, stale ones are overwritten, the driver is never blocked), history 0, ≤ 2 publishers, ≤ 8 subscribers |
+//! | same name, event | — | the driver notifies after each send; subscribers wait on it (no polling) |
+//! | `mrsmap/poses` | blackboard, key `u32` object id → [`ObjectPose`](super::wire::ObjectPose) | created by the tracker (its only writer), ≤ 16 readers; each entry holds the object's newest pose |
+//! | `mrsmap/poses`, event | — | the tracker notifies after each frame's poses |
+//!
+//! Poses go on a blackboard rather than a publish–subscribe service: updating an entry
+//! writes shared memory in place, while iceoryx2 0.10's publisher allocates a small
+//! shared-state block on the heap for every loaned sample (measured), and the tracker
+//! loop allocates nothing. A control stack wants the newest pose anyway; the frame
+//! sequence in each pose shows whether one was missed.
+
+use super::wire::{ObjectPose, WireFrame};
+use iceoryx2::node::Node;
+use iceoryx2::prelude::*;
+use iceoryx2::service::port_factory::{blackboard, event, publish_subscribe};
+
+/// The iceoryx2 service flavour of every port: inter-process shared memory.
+pub type Ipc = iceoryx2::service::ipc::Service;
+
+/// The default pose service.
+pub const POSES_SERVICE: &str = "mrsmap/poses";
+
+/// An iceoryx2 operation failed.
+#[derive(Debug, thiserror::Error)]
+#[error("iceoryx2: {what}: {message}")]
+pub struct IpcError {
+    /// What was being done (names the service).
+    pub what: String,
+    /// iceoryx2's error.
+    pub message: String,
+}
+
+impl IpcError {
+    /// An error while doing `what`.
+    pub fn new(what: impl Into<String>, error: impl std::fmt::Debug) -> Self {
+        IpcError { what: what.into(), message: format!("{error:?}") }
+    }
+}
+
+/// The image sizes on the wire.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FrameSize {
+    /// 640×480.
+    Vga,
+    /// 320×240.
+    Qvga,
+}
+
+impl FrameSize {
+    /// The frame service of camera `camera` at this size.
+    pub fn service(&self, camera: &str) -> String {
+        match self {
+            FrameSize::Vga => format!("{camera}/rgbd/vga"),
+            FrameSize::Qvga => format!("{camera}/rgbd/qvga"),
+        }
+    }
+
+    /// Width and height.
+    pub fn dimensions(&self) -> (u32, u32) {
+        match self {
+            FrameSize::Vga => (640, 480),
+            FrameSize::Qvga => (320, 240),
+        }
+    }
+}
+
+/// A process's iceoryx2 node, named for diagnostics. SIGINT and SIGTERM are turned into
+/// termination requests that `Node::wait` and `WaitSet` report. iceoryx2 logs errors
+/// only, unless `IOX2_LOG_LEVEL` says otherwise.
+pub fn node(name: &str) -> Result<Node<Ipc>, IpcError> {
+    // iceoryx2 warns on stderr that no iceoryx2.toml was found; its defaults are ours.
+    set_log_level_from_env_or(LogLevel::Error);
+    let node_name = NodeName::new(name).map_err(|e| IpcError::new(format!("node name {name}"), e))?;
+    NodeBuilder::new()
+        .name(&node_name)
+        .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
+        .create::<Ipc>()
+        .map_err(|e| IpcError::new(format!("creating node {name}"), e))
+}
+
+fn service_name(name: &str) -> Result<ServiceName, IpcError> {
+    ServiceName::new(name).map_err(|e| IpcError::new(format!("service name {name}"), e))
+}
+
+/// The frame service `name` (publish–subscribe with the QoS above).
+pub fn frames<F: WireFrame>(
+    node: &Node<Ipc>,
+    name: &str,
+) -> Result<publish_subscribe::PortFactory<Ipc, F, ()>, IpcError> {
+    node.service_builder(&service_name(name)?)
+        .publish_subscribe::<F>()
+        .enable_safe_overflow(true)
+        .subscriber_max_buffer_size(1)
+        .subscriber_max_borrowed_samples(2)
+        .history_size(0)
+        .max_publishers(2)
+        .max_subscribers(8)
+        .open_or_create()
+        .map_err(|e| IpcError::new(format!("opening frame service {name}"), e))
+}
+
+/// The event service `name` that accompanies a publish–subscribe service.
+pub fn events(node: &Node<Ipc>, name: &str) -> Result<event::PortFactory<Ipc>, IpcError> {
+    node.service_builder(&service_name(name)?)
+        .event()
+        .max_notifiers(4)
+        .max_listeners(16)
+        .open_or_create()
+        .map_err(|e| IpcError::new(format!("opening event service {name}"), e))
+}
+
+/// Most objects a pose blackboard holds (keys `0..`).
+pub const MAX_OBJECTS: u32 = 64;
+
+/// Creates the pose blackboard `name` (by default [`POSES_SERVICE`]): one entry per
+/// object, key = object id, holding its newest [`ObjectPose`]. The tracker creates it
+/// (and is its only writer); clients open it.
+pub fn create_poses(
+    node: &Node<Ipc>,
+    name: &str,
+    initial: &[ObjectPose],
+) -> Result<blackboard::PortFactory<Ipc, u32>, IpcError> {
+    if initial.len() > MAX_OBJECTS as usize {
+        return Err(IpcError::new(format!("pose blackboard {name}"), format!("more than {MAX_OBJECTS} objects")));
+    }
+    let mut builder = node.service_builder(&service_name(name)?).blackboard_creator::<u32>().max_readers(16);
+    for (k, pose) in initial.iter().enumerate() {
+        builder = builder.add::<ObjectPose>(k as u32, *pose);
+    }
+    builder
+        .create()
+        .map_err(|e| IpcError::new(format!("creating pose blackboard {name} (is another tracker running?)"), e))
+}
+
+/// Opens the pose blackboard `name`.
+pub fn open_poses(node: &Node<Ipc>, name: &str) -> Result<blackboard::PortFactory<Ipc, u32>, IpcError> {
+    node.service_builder(&service_name(name)?)
+        .blackboard_opener::<u32>()
+        .max_readers(16)
+        .open()
+        .map_err(|e| IpcError::new(format!("opening pose blackboard {name}"), e))
+}
+
+/// Nanoseconds since the Unix epoch (the stamps in the wire messages).
+pub fn now_ns() -> u64 {
+    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64)
+}

@@ -1,0 +1,258 @@
+//! The tracker's configuration (`robot_config/tracker.toml`): read into raw serde
+//! structs, then checked into typed parameters. Keys are the names of the fields they
+//! set; every key but the objects' has a default.
+//!
+//! ```toml
+//! [camera]
+//! service = "mrsmap/camera0"   # the camera driver's --service
+//! size = "vga"                 # "vga" or "qvga": the frame message type
+//!
+//! [poses]                      # optional
+//! service = "mrsmap/poses"     # where poses are published
+//!
+//! [tracker]                    # all optional
+//! threads = 2
+//! lambda = 0.01                # scene-map resolution factor
+//! gate_mahalanobis2 = 12.0
+//! region_margin_px = 16.0
+//! min_quality = 0.5
+//! min_quality_initialise = 0.6
+//! lost_after_frames = 3
+//! lm_max_iterations = 20
+//! coarsest_level = 4
+//!
+//! [[object]]
+//! name = "teddy"
+//! model = "../models/teddy.mrsm"           # relative to this file
+//! camera_from_object = [0.1, 0.2, 0.9, 0.0, 0.0, 0.0, 1.0]   # tx ty tz qx qy qz qw
+//! search_translation_m = 0.05              # optional
+//! search_yaw_deg = 20.0                    # optional
+//! ```
+
+use super::ipc::FrameSize;
+use crate::geometry::Pose;
+use crate::tracking::{SearchRegion, TrackerParams};
+use nalgebra::{Quaternion, Translation3, UnitQuaternion};
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+use thiserror::Error;
+
+/// Why a configuration could not be used.
+#[derive(Debug, Error)]
+pub enum ConfigError {
+    /// The file could not be read.
+    #[error("cannot read tracker config {path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// The file is not valid TOML or has unknown or ill-typed keys.
+    #[error("tracker config {path}: {message}")]
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+/// One object to track.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ObjectConfig {
+    /// Name (reports, pose messages).
+    pub name: String,
+    /// Model file (resolved against the config's folder).
+    pub model: PathBuf,
+    /// Expected pose when tracking starts.
+    pub camera_from_object: Pose,
+    /// Where else to look when (re-)initialising.
+    pub search: SearchRegion,
+}
+
+/// The checked configuration.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrackerConfig {
+    /// The camera driver's service prefix.
+    pub camera_service: String,
+    /// Frame message size.
+    pub frame_size: FrameSize,
+    /// The pose service.
+    pub poses_service: String,
+    /// Worker threads (all cores if absent).
+    pub threads: Option<usize>,
+    /// Tracking parameters.
+    pub params: TrackerParams,
+    /// Objects, in id order.
+    pub objects: Vec<ObjectConfig>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawConfig {
+    camera: RawCamera,
+    #[serde(default)]
+    poses: RawPoses,
+    #[serde(default)]
+    tracker: RawTracker,
+    #[serde(default)]
+    object: Vec<RawObject>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawCamera {
+    service: String,
+    #[serde(default = "default_size")]
+    size: String,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawPoses {
+    service: String,
+}
+
+impl Default for RawPoses {
+    fn default() -> Self {
+        RawPoses { service: super::ipc::POSES_SERVICE.into() }
+    }
+}
+
+fn default_size() -> String {
+    "vga".into()
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawTracker {
+    threads: Option<usize>,
+    lambda: Option<f64>,
+    gate_mahalanobis2: Option<f64>,
+    region_margin_px: Option<f64>,
+    min_quality: Option<f64>,
+    min_quality_initialise: Option<f64>,
+    lost_after_frames: Option<u32>,
+    lm_max_iterations: Option<usize>,
+    coarsest_level: Option<usize>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawObject {
+    name: String,
+    model: PathBuf,
+    camera_from_object: [f64; 7],
+    #[serde(default)]
+    search_translation_m: f64,
+    #[serde(default)]
+    search_yaw_deg: f64,
+}
+
+/// Parses a configuration; `origin` names it in errors and resolves relative model paths.
+pub fn parse_tracker_config(text: &str, origin: &Path) -> Result<TrackerConfig, ConfigError> {
+    let invalid = |message: String| ConfigError::Invalid { path: origin.to_path_buf(), message };
+    let raw: RawConfig = toml::from_str(text).map_err(|e| invalid(e.to_string()))?;
+    let frame_size = match raw.camera.size.as_str() {
+        "vga" => FrameSize::Vga,
+        "qvga" => FrameSize::Qvga,
+        other => return Err(invalid(format!("camera.size = {other:?}: expected \"vga\" or \"qvga\""))),
+    };
+    if raw.camera.service.is_empty() {
+        return Err(invalid("camera.service is empty".into()));
+    }
+    let t = raw.tracker;
+    let mut params = TrackerParams::default();
+    params.map.lambda = t.lambda.unwrap_or(params.map.lambda);
+    params.gate_mahalanobis2 = t.gate_mahalanobis2.unwrap_or(params.gate_mahalanobis2);
+    params.region_margin_px = t.region_margin_px.unwrap_or(params.region_margin_px);
+    params.min_quality = t.min_quality.unwrap_or(params.min_quality);
+    params.min_quality_initialise = t.min_quality_initialise.unwrap_or(params.min_quality_initialise);
+    params.lost_after_frames = t.lost_after_frames.unwrap_or(params.lost_after_frames);
+    params.registration.lm_max_iterations = t.lm_max_iterations.unwrap_or(params.registration.lm_max_iterations);
+    params.registration.coarsest_level = t.coarsest_level.unwrap_or(params.registration.coarsest_level);
+    params.validate().map_err(|e| invalid(e.to_string()))?;
+    params.map.validate().map_err(|e| invalid(e.to_string()))?;
+    if t.threads == Some(0) {
+        return Err(invalid("tracker.threads must be at least 1".into()));
+    }
+    if raw.object.is_empty() {
+        return Err(invalid("no [[object]] to track".into()));
+    }
+    let base = origin.parent().unwrap_or(Path::new("."));
+    let objects =
+        raw.object.into_iter().map(|o| object(o, base)).collect::<Result<Vec<_>, String>>().map_err(invalid)?;
+    if raw.poses.service.is_empty() {
+        return Err(invalid("poses.service is empty".into()));
+    }
+    Ok(TrackerConfig {
+        camera_service: raw.camera.service,
+        frame_size,
+        poses_service: raw.poses.service,
+        threads: t.threads,
+        params,
+        objects,
+    })
+}
+
+fn object(o: RawObject, base: &Path) -> Result<ObjectConfig, String> {
+    let [tx, ty, tz, qx, qy, qz, qw] = o.camera_from_object;
+    if !o.camera_from_object.iter().all(|v| v.is_finite()) {
+        return Err(format!("object {}: camera_from_object must be finite", o.name));
+    }
+    let q = Quaternion::new(qw, qx, qy, qz);
+    if (q.norm() - 1.0).abs() > 1e-3 {
+        return Err(format!("object {}: the quaternion of camera_from_object has norm {:.4}, not 1", o.name, q.norm()));
+    }
+    let non_negative = |v: f64| v.is_finite() && v >= 0.0;
+    if !non_negative(o.search_translation_m) || !non_negative(o.search_yaw_deg) {
+        return Err(format!("object {}: search_translation_m and search_yaw_deg must be >= 0", o.name));
+    }
+    if o.name.is_empty() || o.name.len() > 31 {
+        return Err(format!("object name {:?} must have 1 to 31 bytes", o.name));
+    }
+    let model = if o.model.is_absolute() { o.model } else { base.join(o.model) };
+    Ok(ObjectConfig {
+        name: o.name,
+        model,
+        camera_from_object: Pose::from_parts(Translation3::new(tx, ty, tz), UnitQuaternion::from_quaternion(q)),
+        search: SearchRegion { translation_m: o.search_translation_m, yaw_rad: o.search_yaw_deg.to_radians() },
+    })
+}
+
+/// Reads a configuration.
+pub fn read_tracker_config(path: &Path) -> Result<TrackerConfig, ConfigError> {
+    let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io { path: path.to_path_buf(), source })?;
+    parse_tracker_config(&text, path)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GOOD: &str = "[camera]\nservice = \"cam\"\n[[object]]\nname = \"teddy\"\nmodel = \"../models/teddy.mrsm\"\ncamera_from_object = [0, 0, 1, 0, 0, 0, 1]\n";
+
+    #[test]
+    fn defaults_fill_in_and_paths_resolve_against_the_file() {
+        let c = parse_tracker_config(GOOD, Path::new("robot_config/tracker.toml")).expect("valid");
+        assert_eq!(c.frame_size, FrameSize::Vga);
+        assert_eq!(c.params, TrackerParams::default());
+        assert_eq!(c.objects[0].model, Path::new("robot_config/../models/teddy.mrsm"));
+    }
+
+    #[test]
+    fn mistakes_are_named() {
+        let p = Path::new("t.toml");
+        let typo = GOOD.replace("[camera]", "[camera]\nsize = \"hd\"");
+        assert!(parse_tracker_config(&typo, p).unwrap_err().to_string().contains("camera.size"));
+        let bad_q = GOOD.replace("0, 0, 0, 1]", "0, 0, 0, 2]");
+        assert!(parse_tracker_config(&bad_q, p).unwrap_err().to_string().contains("quaternion"));
+        let unknown = GOOD.replace("[camera]", "[tracker]\nlamda = 0.1\n[camera]");
+        assert!(parse_tracker_config(&unknown, p).unwrap_err().to_string().contains("lamda"));
+        let bad_q = GOOD.replace("[camera]", "[tracker]\nmin_quality = 3.0\n[camera]");
+        assert!(parse_tracker_config(&bad_q, p).unwrap_err().to_string().contains("min_quality"));
+        let none = "[camera]\nservice = \"cam\"\n";
+        assert!(parse_tracker_config(none, p).unwrap_err().to_string().contains("no [[object]]"));
+    }
+}

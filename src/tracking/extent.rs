@@ -1,0 +1,166 @@
+//! Where a model's points are, and the image region and pixel gate that follow from a
+//! pose (paper §5.2).
+
+use super::params::TrackerParams;
+use crate::geometry::{CameraModel, Pose};
+use crate::map::{GateVolume, ImageRegion, MAX_GATE_CORNERS, PixelGate};
+use crate::slam::VolumeShape;
+use nalgebra::{Matrix3, Point3, Vector3};
+use thiserror::Error;
+
+/// Why a model's extent cannot be used for gating.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum ExtentError {
+    /// The root covariance is not positive definite (a flat or empty model).
+    #[error("the model's point covariance is not positive definite (is the model empty or flat?)")]
+    Covariance,
+    /// The volume's polygon has too many corners for the tracker's fixed storage.
+    #[error("the volume of interest has {corners} corners; the tracker takes at most {max}")]
+    TooManyCorners {
+        /// Corners in the model.
+        corners: usize,
+        /// The limit.
+        max: usize,
+    },
+}
+
+/// The spatial distribution of a model's points (its root statistics) and its volume
+/// of interest, in the object frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ModelExtent {
+    mean: Vector3<f64>,
+    covariance: Matrix3<f64>,
+    inverse_covariance: Matrix3<f64>,
+    volume: Option<GateVolume>,
+    /// Bounding box of the volume (object frame), if any.
+    volume_box: Option<(Vector3<f64>, Vector3<f64>)>,
+}
+
+impl ModelExtent {
+    /// From the root statistics (mean, covariance) and the volume of interest.
+    pub fn new(
+        mean: Vector3<f64>,
+        covariance: Matrix3<f64>,
+        volume: Option<&VolumeShape>,
+    ) -> Result<Self, ExtentError> {
+        let covariance = (covariance + covariance.transpose()) * 0.5;
+        let inverse_covariance = covariance
+            .cholesky()
+            .map(|c| c.inverse())
+            .filter(|m| m.iter().all(|v| v.is_finite()))
+            .ok_or(ExtentError::Covariance)?;
+        let (volume, volume_box) = match volume {
+            None => (None, None),
+            Some(VolumeShape::Prism { polygon, min_z, max_z }) => {
+                let corners: heapless::Vec<[f32; 2], MAX_GATE_CORNERS> =
+                    heapless::Vec::from_iter(polygon.iter().take(MAX_GATE_CORNERS).map(|c| [c[0] as f32, c[1] as f32]));
+                if polygon.len() > MAX_GATE_CORNERS {
+                    return Err(ExtentError::TooManyCorners { corners: polygon.len(), max: MAX_GATE_CORNERS });
+                }
+                let lo = polygon.iter().fold([f64::INFINITY; 2], |m, c| [m[0].min(c[0]), m[1].min(c[1])]);
+                let hi = polygon.iter().fold([f64::NEG_INFINITY; 2], |m, c| [m[0].max(c[0]), m[1].max(c[1])]);
+                let gate = GateVolume::Prism { polygon: corners, min_z: *min_z as f32, max_z: *max_z as f32 };
+                (Some(gate), Some((Vector3::new(lo[0], lo[1], *min_z), Vector3::new(hi[0], hi[1], *max_z))))
+            }
+            Some(VolumeShape::Box { half_extents }) => {
+                let h = Vector3::from(*half_extents);
+                (Some(GateVolume::Box { half_extents: half_extents.map(|v| v as f32) }), Some((-h, h)))
+            }
+        };
+        Ok(ModelExtent { mean, covariance, inverse_covariance, volume, volume_box })
+    }
+
+    /// The gate at `object_from_camera`: points inside the volume and within
+    /// `max_mahalanobis2` of the model's distribution.
+    pub fn gate(&self, object_from_camera: &Pose, max_mahalanobis2: f64) -> PixelGate {
+        PixelGate {
+            rotation: object_from_camera.rotation.to_rotation_matrix().into_inner().cast(),
+            translation: object_from_camera.translation.vector.cast(),
+            mean: self.mean.cast(),
+            inverse_covariance: self.inverse_covariance.cast(),
+            max_mahalanobis2: max_mahalanobis2 as f32,
+            volume: self.volume.clone(),
+        }
+    }
+
+    /// The bounding box (object frame) of the points the gate can keep.
+    fn gate_box(&self, max_mahalanobis2: f64) -> (Vector3<f64>, Vector3<f64>) {
+        let half = Vector3::from_fn(|i, _| (max_mahalanobis2 * self.covariance[(i, i)]).sqrt());
+        let (mut lo, mut hi) = (self.mean - half, self.mean + half);
+        if let Some((vlo, vhi)) = &self.volume_box {
+            lo = lo.sup(vlo);
+            hi = hi.inf(vhi);
+        }
+        (lo, hi)
+    }
+
+    /// The region of interest of a frame from `camera` when the object is at
+    /// `object_from_camera`: the projection of the gate's bounding box, grown by the
+    /// margin, with the gate. The whole image if the box reaches behind the camera.
+    pub fn region(&self, object_from_camera: &Pose, camera: &CameraModel, params: &TrackerParams) -> ImageRegion {
+        let (w, h) = (camera.width as usize, camera.height as usize);
+        let gate = self.gate(object_from_camera, params.gate_mahalanobis2);
+        let (lo, hi) = self.gate_box(params.gate_mahalanobis2);
+        let camera_from_object = object_from_camera.inverse();
+        let k = &camera.intrinsics;
+        let (mut u_min, mut u_max, mut v_min, mut v_max) =
+            (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+        for corner in 0..8 {
+            let p = Point3::new(
+                if corner & 1 == 0 { lo.x } else { hi.x },
+                if corner & 2 == 0 { lo.y } else { hi.y },
+                if corner & 4 == 0 { lo.z } else { hi.z },
+            );
+            let c = camera_from_object * p;
+            if c.z < 0.05 {
+                return ImageRegion { rows: 0..h, cols: 0..w, gate: Some(gate) };
+            }
+            let (u, v) = (k.fx * c.x / c.z + k.cx, k.fy * c.y / c.z + k.cy);
+            (u_min, u_max, v_min, v_max) = (u_min.min(u), u_max.max(u), v_min.min(v), v_max.max(v));
+        }
+        let m = params.region_margin_px;
+        let clamp = |x: f64, n: usize| x.clamp(0.0, n as f64) as usize;
+        let cols = clamp((u_min - m).floor(), w)..clamp((u_max + m).ceil() + 1.0, w);
+        let rows = clamp((v_min - m).floor(), h)..clamp((v_max + m).ceil() + 1.0, h);
+        ImageRegion { rows, cols, gate: Some(gate) }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::PinholeIntrinsics;
+    use nalgebra::{Translation3, UnitQuaternion};
+
+    fn camera() -> CameraModel {
+        CameraModel {
+            width: 640,
+            height: 480,
+            intrinsics: PinholeIntrinsics { fx: 500.0, fy: 500.0, cx: 320.0, cy: 240.0 },
+            distortion: [0.0; 5],
+            depth_scale_m: 0.0002,
+        }
+    }
+
+    #[test]
+    fn the_region_frames_the_object_and_the_whole_image_when_too_close() {
+        let shape = VolumeShape::Box { half_extents: [0.1, 0.1, 0.1] };
+        let e = ModelExtent::new(Vector3::zeros(), Matrix3::identity() * 0.01, Some(&shape)).expect("extent");
+        // Camera 1 m in front of the object, looking at it (object at camera z = 1).
+        let object_from_camera = Pose::from_parts(Translation3::new(0.0, 0.0, -1.0), UnitQuaternion::identity());
+        let r =
+            e.region(&object_from_camera, &camera(), &TrackerParams { region_margin_px: 0.0, ..Default::default() });
+        // The box (±0.1 m, nearest face at 0.9 m) spans about ±56 px around the centre.
+        assert!(r.cols.start >= 260 && r.cols.start <= 270 && r.cols.end >= 370 && r.cols.end <= 380, "{r:?}");
+        assert!(r.rows.start >= 180 && r.rows.end <= 300, "{r:?}");
+        let close = Pose::from_parts(Translation3::new(0.0, 0.0, -0.05), UnitQuaternion::identity());
+        let r = e.region(&close, &camera(), &TrackerParams::default());
+        assert_eq!((r.rows, r.cols), (0..480, 0..640));
+    }
+
+    #[test]
+    fn a_flat_model_is_refused() {
+        let flat = Matrix3::from_diagonal(&Vector3::new(0.01, 0.01, 0.0));
+        assert_eq!(ModelExtent::new(Vector3::zeros(), flat, None), Err(ExtentError::Covariance));
+    }
+}

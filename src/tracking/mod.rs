@@ -1,0 +1,25 @@
+//! Object tracking (paper §5.2): each frame, for each object, the pixels in the volume
+//! of interest around its predicted pose that are likely under the model's point
+//! distribution become a scene map, which is registered to the object's model.
+//!
+//! ```text
+//! predict (constant velocity, or a re-initialisation hypothesis)
+//!   → region of interest + pixel gate (extent.rs)
+//!   → scene map of those pixels (map::MapBuilder::build_region, §3.3)
+//!   → registration to the model (§4: LM, Newton, covariance Eq. 6)
+//!   → quality (fraction of scene surfels explained) → status (tracking / lost / initialising)
+//! ```
+//!
+//! No I/O, clock or logging; every buffer is allocated by [`Tracker::new`]. The live
+//! tracker process and offline replays call the same [`Tracker::step`] (or its two
+//! stages, to time them).
+
+pub mod extent;
+pub mod object;
+pub mod params;
+pub mod tracker;
+
+pub use extent::{ExtentError, ModelExtent};
+pub use object::{ObjectModel, PoseEstimate, SearchRegion, TrackingStatus};
+pub use params::{TrackerParams, TrackerParamsError};
+pub use tracker::{Tracker, TrackerError};

@@ -1,0 +1,137 @@
+//! One tracked object: its model, its scene map, and its state (paper §5.2).
+
+use super::extent::ModelExtent;
+use crate::geometry::Pose;
+use crate::map::SurfelMap;
+use crate::registration::{MatchScratch, RegistrationWorkspace};
+use nalgebra::{Matrix6, Translation3, UnitQuaternion, Vector3};
+
+/// What a tracked object is doing, as published.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u8)]
+pub enum TrackingStatus {
+    /// The pose was estimated from this frame.
+    Tracking = 0,
+    /// Tracking was lost at this frame; re-initialisation starts with the next one. The
+    /// pose is the last good one.
+    Lost = 1,
+    /// Looking for the object from the configured initial pose and search region; the
+    /// pose is the hypothesis tried.
+    Initialising = 2,
+    /// The frame could not be used (wrong size, no depth, bad intrinsics); the object's
+    /// state is unchanged.
+    InvalidFrame = 3,
+}
+
+/// A pose estimate for one object in one frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PoseEstimate {
+    /// Stamp of the frame it answers (ns).
+    pub stamp_ns: u64,
+    /// Index of the object in the tracker.
+    pub object: usize,
+    /// Status.
+    pub status: TrackingStatus,
+    /// The object in the camera's optical frame (REP 103: x right, y down, z forward).
+    pub camera_from_object: Pose,
+    /// Covariance of `camera_from_object` in the ROS `PoseWithCovariance` convention
+    /// (x, y, z, rot x, rot y, rot z in the camera frame), from Eq. (6).
+    pub covariance_ros: Matrix6<f64>,
+    /// How well the model explains the scene at the estimate: the matching
+    /// log-likelihood gain per usable scene surfel (§5.1.1's measure) divided by 3, the
+    /// expected gain of a surfel matching an exact copy of itself. Range 0–1.5: about 1
+    /// or more for a good fit, below about 0.5 for a failed one, 0 when the
+    /// registration failed.
+    pub quality: f64,
+    /// Surfel associations at the estimate.
+    pub associations: usize,
+    /// LM + Newton iterations.
+    pub iterations: usize,
+    /// Consecutive frames without a good registration.
+    pub bad_frames: u32,
+}
+
+impl PoseEstimate {
+    pub(crate) fn empty(object: usize) -> Self {
+        PoseEstimate {
+            stamp_ns: 0,
+            object,
+            status: TrackingStatus::Initialising,
+            camera_from_object: Pose::identity(),
+            covariance_ros: Matrix6::identity(),
+            quality: 0.0,
+            associations: 0,
+            iterations: 0,
+            bad_frames: 0,
+        }
+    }
+}
+
+/// Where to look for an object when tracking starts or is lost.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SearchRegion {
+    /// Hypotheses are also tried shifted by this much along each camera axis (m); 0: none.
+    pub translation_m: f64,
+    /// … and turned by this much either way about the object's `z` axis (rad); 0: none.
+    pub yaw_rad: f64,
+}
+
+/// What the tracker needs to know about an object.
+#[derive(Debug, Clone)]
+pub struct ObjectModel {
+    /// Name (for reports).
+    pub name: String,
+    /// The model map (object frame).
+    pub map: SurfelMap,
+    /// Where its points are.
+    pub extent: ModelExtent,
+    /// The object's expected pose when tracking starts.
+    pub initial_camera_from_object: Pose,
+    /// Where else to look.
+    pub search: SearchRegion,
+}
+
+/// The re-initialisation hypotheses (`object_from_camera`): the initial pose first,
+/// then shifted along ±x, ±y, ±z of the camera, then turned about the object's `z`.
+pub(crate) fn hypotheses(initial_camera_from_object: &Pose, search: &SearchRegion) -> Vec<Pose> {
+    let c = *initial_camera_from_object;
+    let mut out = vec![c];
+    if search.translation_m > 0.0 {
+        for axis in 0..3 {
+            for sign in [1.0, -1.0] {
+                let shift = Vector3::ith(axis, sign * search.translation_m);
+                out.push(Pose::from_parts(Translation3::from(shift), UnitQuaternion::identity()) * c);
+            }
+        }
+    }
+    if search.yaw_rad > 0.0 {
+        for sign in [1.0, -1.0] {
+            out.push(c * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), sign * search.yaw_rad));
+        }
+    }
+    out.iter().map(Pose::inverse).collect()
+}
+
+/// A tracked object: the model, the scene map and workspace reused every frame, and
+/// the state.
+#[derive(Debug)]
+pub(crate) struct TrackedObject {
+    pub model: SurfelMap,
+    pub extent: ModelExtent,
+    pub scene: SurfelMap,
+    pub workspace: RegistrationWorkspace,
+    pub scratch: MatchScratch,
+    /// Re-initialisation hypotheses (`object_from_camera`).
+    pub hypotheses: Vec<Pose>,
+    pub next_hypothesis: usize,
+    /// Last estimate (`object_from_camera`).
+    pub object_from_camera: Pose,
+    /// Camera motion of the last good frame (`previous_from_current`).
+    pub motion: Pose,
+    pub tracking: bool,
+    pub bad_frames: u32,
+    /// The prior of the frame being processed.
+    pub prior: Pose,
+    /// A pose to try next instead of the next hypothesis (set by the caller).
+    pub requested: Option<Pose>,
+}

@@ -1,0 +1,86 @@
+//! Parameters of object tracking (paper §5.2).
+
+use crate::map::MapParams;
+use crate::registration::RegistrationParams;
+
+/// How objects are tracked.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TrackerParams {
+    /// Building the scene map of each object's surroundings. Its finest resolution and
+    /// number of levels are taken from each model.
+    pub map: MapParams,
+    /// Registration of the scene map to the model. Tracking uses levels 0–4 (finest
+    /// resolution to 16× finest, as the authors' tracker) and at most 20 LM iterations.
+    pub registration: RegistrationParams,
+    /// Pixels whose points lie farther than this squared Mahalanobis distance from the
+    /// model's point distribution (its root statistics) are not used (§5.2; the
+    /// original: 8 · 1.5 = 12 within 3 m).
+    pub gate_mahalanobis2: f64,
+    /// The image region processed is the projection of the gate's bounding box, grown by
+    /// this many pixels on each side for the motion the prediction misses.
+    pub region_margin_px: f64,
+    /// A registration counts as good when its quality (the matching log-likelihood per
+    /// scene surfel, normalised: see [`super::PoseEstimate::quality`]) is at least this.
+    pub min_quality: f64,
+    /// Re-initialisation needs a stricter quality: a hypothesis far from the truth can
+    /// match a fraction of the scene.
+    pub min_quality_initialise: f64,
+    /// Tracking is declared lost after this many consecutive frames without a good
+    /// registration (the pose is held meanwhile).
+    pub lost_after_frames: u32,
+    /// Predict the next pose by constant velocity.
+    pub constant_velocity: bool,
+}
+
+impl Default for TrackerParams {
+    fn default() -> Self {
+        TrackerParams {
+            map: MapParams::default(),
+            registration: RegistrationParams {
+                coarsest_level: 4,
+                lm_max_iterations: 20,
+                ..RegistrationParams::default()
+            },
+            gate_mahalanobis2: 12.0,
+            region_margin_px: 16.0,
+            min_quality: 0.5,
+            min_quality_initialise: 0.6,
+            lost_after_frames: 3,
+            constant_velocity: true,
+        }
+    }
+}
+
+/// A parameter out of range.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("tracker parameter {name} = {value} is out of range (expected {expected})")]
+pub struct TrackerParamsError {
+    /// Parameter name.
+    pub name: &'static str,
+    /// The value.
+    pub value: f64,
+    /// What is allowed.
+    pub expected: &'static str,
+}
+
+impl TrackerParams {
+    /// Checks ranges; the error names the first bad parameter.
+    pub fn validate(&self) -> Result<(), TrackerParamsError> {
+        let err = |name, value: f64, expected| Err(TrackerParamsError { name, value, expected });
+        if !(self.gate_mahalanobis2.is_finite() && self.gate_mahalanobis2 > 0.0) {
+            return err("gate_mahalanobis2", self.gate_mahalanobis2, "> 0");
+        }
+        if !(self.region_margin_px.is_finite() && self.region_margin_px >= 0.0) {
+            return err("region_margin_px", self.region_margin_px, ">= 0");
+        }
+        for (name, q) in [("min_quality", self.min_quality), ("min_quality_initialise", self.min_quality_initialise)] {
+            if !(0.0..=1.0).contains(&q) {
+                return err(name, q, "0 ..= 1");
+            }
+        }
+        if self.lost_after_frames == 0 {
+            return err("lost_after_frames", 0.0, ">= 1");
+        }
+        Ok(())
+    }
+}

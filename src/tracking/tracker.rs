@@ -1,0 +1,261 @@
+//! The per-frame tracking step (paper §5.2).
+
+use super::object::{ObjectModel, PoseEstimate, TrackedObject, TrackingStatus, hypotheses};
+use super::params::{TrackerParams, TrackerParamsError};
+use crate::frame::RgbdFrame;
+use crate::geometry::Pose;
+use crate::geometry::se3::{invert_left_covariance, left_covariance_to_ros};
+use crate::map::{BuildReport, MapBuilder, MapCapacity, MapError, MapParams, MapParamsError, SurfelMap};
+use crate::registration::{MatchScratch, Registration, RegistrationError, RegistrationWorkspace, register};
+use thiserror::Error;
+
+/// Why a tracker could not be set up.
+#[derive(Debug, Error)]
+pub enum TrackerError {
+    /// The parameters are invalid.
+    #[error(transparent)]
+    Params(#[from] TrackerParamsError),
+    /// The scene-map parameters derived from a model are invalid.
+    #[error("object '{name}': {source}")]
+    MapParams {
+        /// Object name.
+        name: String,
+        /// Cause.
+        source: MapParamsError,
+    },
+    /// No object to track.
+    #[error("no object to track")]
+    NoObjects,
+}
+
+/// Tracks objects in RGB-D frames. Everything is allocated in [`Tracker::new`]; a step
+/// allocates nothing.
+#[derive(Debug)]
+pub struct Tracker {
+    params: TrackerParams,
+    builder: MapBuilder,
+    objects: Vec<TrackedObject>,
+    names: Vec<String>,
+}
+
+impl Tracker {
+    /// A tracker for frames up to `max_width × max_height` and the given objects.
+    pub fn new(
+        params: TrackerParams,
+        max_width: usize,
+        max_height: usize,
+        models: Vec<ObjectModel>,
+    ) -> Result<Self, TrackerError> {
+        params.validate()?;
+        if models.is_empty() {
+            return Err(TrackerError::NoObjects);
+        }
+        let capacity = MapCapacity::for_image(max_width * max_height);
+        let mut objects = Vec::with_capacity(models.len());
+        let mut names = Vec::with_capacity(models.len());
+        for m in models {
+            let model_params = m.map.params();
+            let scene_params = MapParams {
+                finest_resolution_m: model_params.finest_resolution_m,
+                num_levels: model_params.num_levels,
+                ..params.map
+            };
+            let scene = SurfelMap::new(scene_params, capacity)
+                .map_err(|source| TrackerError::MapParams { name: m.name.clone(), source })?;
+            let object_from_camera = m.initial_camera_from_object.inverse();
+            objects.push(TrackedObject {
+                hypotheses: hypotheses(&m.initial_camera_from_object, &m.search),
+                model: m.map,
+                extent: m.extent,
+                scene,
+                workspace: RegistrationWorkspace::new(capacity.nodes),
+                scratch: MatchScratch::new(capacity.surfels),
+                next_hypothesis: 0,
+                object_from_camera,
+                motion: Pose::identity(),
+                tracking: false,
+                bad_frames: 0,
+                prior: object_from_camera,
+                requested: None,
+            });
+            names.push(m.name);
+        }
+        Ok(Tracker { params, builder: MapBuilder::new(max_width, max_height, capacity.surfels), objects, names })
+    }
+
+    /// Number of objects.
+    pub fn len(&self) -> usize {
+        self.objects.len()
+    }
+
+    /// Whether the tracker has no object (never: [`Tracker::new`] refuses that).
+    pub fn is_empty(&self) -> bool {
+        self.objects.is_empty()
+    }
+
+    /// The objects' names, in index order.
+    pub fn names(&self) -> &[String] {
+        &self.names
+    }
+
+    /// The scene map last built for object `k` (camera frame).
+    pub fn scene(&self, k: usize) -> &SurfelMap {
+        &self.objects[k].scene
+    }
+
+    /// The model of object `k` (object frame).
+    pub fn model(&self, k: usize) -> &SurfelMap {
+        &self.objects[k].model
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &TrackerParams {
+        &self.params
+    }
+
+    /// One frame for every object: `out[k]` receives object `k`'s estimate.
+    pub fn step(&mut self, frame: &RgbdFrame, out: &mut [PoseEstimate]) {
+        for (k, estimate) in out.iter_mut().enumerate().take(self.objects.len()) {
+            *estimate = match self.build_scene(k, frame) {
+                Ok(_) => self.register_object(k, frame.stamp_ns),
+                Err(_) => self.invalid_frame(k, frame.stamp_ns),
+            };
+        }
+    }
+
+    /// Stage 1 for object `k`: predict its pose (constant velocity, or the next
+    /// re-initialisation hypothesis), and build the scene map from the pixels of the
+    /// region of interest that the gate keeps (§5.2).
+    pub fn build_scene(&mut self, k: usize, frame: &RgbdFrame) -> Result<BuildReport, MapError> {
+        let object = &mut self.objects[k];
+        object.prior = if let Some(pose) = object.requested.take() {
+            pose
+        } else if object.tracking {
+            predict(&object.object_from_camera, &object.motion, self.params.constant_velocity)
+        } else {
+            object.hypotheses[object.next_hypothesis % object.hypotheses.len()]
+        };
+        let region = object.extent.region(&object.prior, &frame.camera, &self.params);
+        self.builder.build_region(frame, &region, &mut object.scene)
+    }
+
+    /// Stage 2 for object `k`: register the scene map to the model from the prior
+    /// (§4) and update the object's state from the result's quality.
+    pub fn register_object(&mut self, k: usize, stamp_ns: u64) -> PoseEstimate {
+        let p = &self.params;
+        let object = &mut self.objects[k];
+        let result = register(&object.model, &object.scene, &object.prior, &p.registration, &mut object.workspace);
+        let quality = match &result {
+            Ok(r) => quality(object, &r.model_from_scene, p.registration.covariance_regularization),
+            Err(_) => 0.0,
+        };
+        let min_quality = if object.tracking { p.min_quality } else { p.min_quality_initialise };
+        let status = update_state(object, &result, quality >= min_quality, p.lost_after_frames);
+        let mut e = estimate(k, stamp_ns, status, object, result.ok().as_ref());
+        e.quality = quality;
+        e
+    }
+
+    /// The estimate of object `k` for a frame that could not be used.
+    pub fn invalid_frame(&self, k: usize, stamp_ns: u64) -> PoseEstimate {
+        let object = &self.objects[k];
+        estimate(k, stamp_ns, TrackingStatus::InvalidFrame, object, None)
+    }
+
+    /// Re-initialises object `k` at `camera_from_object` (e.g. from an external
+    /// detector): the next frame is registered from there, and tracking resumes if the
+    /// quality reaches the re-initialisation threshold.
+    pub fn reinitialise(&mut self, k: usize, camera_from_object: &Pose) {
+        let object = &mut self.objects[k];
+        object.tracking = false;
+        object.bad_frames = 0;
+        object.motion = Pose::identity();
+        object.requested = Some(camera_from_object.inverse());
+    }
+
+    /// Forgets every object's state: tracking restarts from the initial poses.
+    pub fn reset(&mut self) {
+        for object in &mut self.objects {
+            object.tracking = false;
+            object.next_hypothesis = 0;
+            object.bad_frames = 0;
+            object.motion = Pose::identity();
+            object.object_from_camera = object.hypotheses[0];
+        }
+    }
+}
+
+/// The matching log-likelihood gain per usable scene surfel at `object_from_camera`,
+/// over its value for a perfect match (`½(χ²_floor − 3)` = 3).
+fn quality(object: &mut TrackedObject, object_from_camera: &Pose, regularization: f64) -> f64 {
+    let score = object.scratch.score(&object.scene, &object.model, object_from_camera, regularization);
+    if score.surfels == 0 { 0.0 } else { score.total / score.surfels as f64 / 3.0 }
+}
+
+/// The constant-velocity prediction: the camera moves again as it moved last frame.
+fn predict(object_from_camera: &Pose, motion: &Pose, constant_velocity: bool) -> Pose {
+    if constant_velocity { object_from_camera * motion } else { *object_from_camera }
+}
+
+/// The state machine: tracking → (bad frames) → lost → initialising → (a good
+/// registration from a hypothesis) → tracking.
+fn update_state(
+    object: &mut TrackedObject,
+    result: &Result<Registration, RegistrationError>,
+    good: bool,
+    lost_after: u32,
+) -> TrackingStatus {
+    match (object.tracking, good, result) {
+        (_, true, Ok(r)) => {
+            object.motion = if object.tracking {
+                object.object_from_camera.inverse() * r.model_from_scene
+            } else {
+                Pose::identity()
+            };
+            object.object_from_camera = r.model_from_scene;
+            object.tracking = true;
+            object.bad_frames = 0;
+            TrackingStatus::Tracking
+        }
+        (true, _, _) => {
+            object.bad_frames += 1;
+            object.motion = Pose::identity();
+            if object.bad_frames >= lost_after {
+                object.tracking = false;
+                object.next_hypothesis = 0;
+                TrackingStatus::Lost
+            } else {
+                TrackingStatus::Tracking
+            }
+        }
+        (false, _, _) => {
+            object.bad_frames += 1;
+            object.next_hypothesis = (object.next_hypothesis + 1) % object.hypotheses.len();
+            object.object_from_camera = object.prior;
+            TrackingStatus::Initialising
+        }
+    }
+}
+
+/// The published estimate: the pose as `camera_from_object` with its covariance in the
+/// ROS convention.
+fn estimate(
+    k: usize,
+    stamp_ns: u64,
+    status: TrackingStatus,
+    object: &TrackedObject,
+    result: Option<&Registration>,
+) -> PoseEstimate {
+    let camera_from_object = object.object_from_camera.inverse();
+    let mut e = PoseEstimate { stamp_ns, status, camera_from_object, ..PoseEstimate::empty(k) };
+    e.bad_frames = object.bad_frames;
+    if let Some(r) = result {
+        e.associations = r.associations;
+        e.iterations = r.lm_iterations + r.newton_iterations;
+        if status == TrackingStatus::Tracking && object.bad_frames == 0 {
+            let cov = invert_left_covariance(&object.object_from_camera, &r.covariance);
+            e.covariance_ros = left_covariance_to_ros(&camera_from_object, &cov);
+        }
+    }
+    e
+}
