@@ -61,5 +61,20 @@ fr3_teddy_first200 tum_fr3 14.0 13.0
 fr1_xyz_first37    tum_fr1 -    4.0
 fr1_desk_9frames   tum_fr1 -    3.0
 TABLE
+# Object tracking (tracker step over frames 100-199; the teddy model was learned from
+# frames 0-99): camera position error, TUM ATE after rigid alignment, median (target <= 10 mm).
+for flags in "" "--qvga"; do
+  line=$($BIN track --config robot_config/tracker.toml --dataset "$DATA/fr3_teddy_first200" \
+    --camera robot_config/cameras/tum_fr3.toml --first-frame 100 --start-at-ground-truth $flags | grep "ATE (aligned)")
+  med=$(echo "$line" | sed -E 's/.*ATE \(aligned\) median ([0-9.]+) mm.*/\1/')
+  printf '%-20s track   %-7s %s   %s\n' fr3_teddy_100-199 "${flags:-VGA}" "$(echo "$line" | sed -E 's/^ *camera position error vs ground truth //')" \
+    "$(awk -v m="$med" 'BEGIN { printf "%s (target median <= 10 mm)", (m <= 10 ? "meets" : "MISSES") }')"
+  if awk -v m="$med" 'BEGIN {exit !(m > 8.5)}'; then echo "  REGRESSION: guard is ATE median <= 8.5 mm"; status=1; fi
+done
+# The tracker's quality signal as a failure detector (precision and recall at min_quality).
+q=$($BIN eval tracking-quality --config robot_config/tracker.toml --dataset "$DATA/fr3_teddy_first200" \
+  --camera robot_config/cameras/tum_fr3.toml | grep "(min_quality)")
+echo "tracking quality < min_quality as failure detector: $q"
+if echo "$q" | awk -F'|' '{exit !($4 < 0.9 || $5 < 0.65)}'; then echo "  REGRESSION: guard is precision >= 0.9, recall >= 0.65"; status=1; fi
 python3 scripts/evo_crosscheck.py "$BIN" "$DATA/fr3_teddy_first200/groundtruth.txt" "$OUT/fr3_teddy_first200.txt"
 exit $status

@@ -6,9 +6,9 @@
 //! Data flow, one module per step (each may only use the ones to its left):
 //!
 //! ```text
-//! geometry ← frame ← map ← registration ← odometry    (core: no I/O, clocks, logging)
-//! eval (trajectory metrics)   synthetic (rendered test scenes)
-//! io (TUM files, PNG, camera files) ← app (jobs) ← main.rs (CLI)
+//! geometry ← frame ← map ← registration ← odometry, slam, tracking   (core: no I/O, clocks, logging)
+//! model (files of maps)   eval (trajectory metrics)   synthetic (rendered test scenes)
+//! io (TUM files, PNG, configs, wire types, iceoryx2 services) ← app (jobs, processes) ← cli (main.rs)
 //! ```
 //!
 //! | module | owns | may not touch |
@@ -18,10 +18,13 @@
 //! | [`map`] | the surfel octree, image aggregation, borders, descriptors | poses over time, files |
 //! | [`registration`] | association, LM on Eq. (5), Newton on Eq. (4), covariance Eq. (6) | maps' construction, config, logging |
 //! | [`odometry`] | frame-to-frame pose chaining with a double-buffered map | files, clocks |
+//! | [`slam`] | key-view SLAM, loop closure, pose graph, fusion into models (§5.1) | files, clocks, the tracker loop |
+//! | [`tracking`] | the per-frame object tracking step and its state machine (§5.2) | iceoryx2, files, allocation per frame |
+//! | [`model`] | the versioned model file format | algorithms |
 //! | [`eval`] | TUM RPE/ATE definitions | files |
-//! | [`io`] | TUM datasets, trajectories, PNG, camera files | algorithms |
+//! | [`io`] | TUM datasets, trajectories, PNG, config files, wire types, iceoryx2 services | algorithms |
 //! | [`synthetic`] | rasteriser, meshes, seeded procedural scenes (tests, demos) | the core |
-//! | [`app`] | the command-line jobs: progress, timing, reports | the maths |
+//! | [`app`] | the command-line jobs and processes: progress, timing, reports | the maths |
 //!
 //! Conventions (frames, tangent space, units): `docs/conventions.md`. Paper → code:
 //! `docs/algorithm.md`.

@@ -14,7 +14,7 @@ fn help_teaches_the_commands() {
     let out = mrsmap(&["--help"]);
     assert!(out.status.success());
     let text = String::from_utf8_lossy(&out.stdout);
-    for word in ["odometry", "map", "model", "eval", "bench"] {
+    for word in ["demo", "camera", "track", "poses", "odometry", "map", "model", "eval", "bench"] {
         assert!(text.contains(word), "{text}");
     }
     let out = mrsmap(&["odometry", "--help"]);
@@ -161,4 +161,16 @@ fn map_refuses_to_run_with_nothing_to_write_and_reports_an_empty_volume() {
     assert!(err.contains("volume of interest") && err.contains("trajectory was written"), "{err}");
     assert!(traj.exists(), "the trajectory is kept");
     assert!(!model.exists(), "no half-made model");
+}
+
+#[test]
+fn the_readme_demo_runs_two_processes_and_tracks_every_frame() {
+    let out = Command::new(env!("CARGO_BIN_EXE_mrsmap"))
+        .args(["demo", "--rate", "20"])
+        .current_dir(root())
+        .output()
+        .expect("demo runs");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}\n{}", String::from_utf8_lossy(&out.stderr));
+    assert!(text.contains("8 poses received, 8 tracking") && text.contains("error vs motion capture"), "{text}");
 }

@@ -227,3 +227,54 @@ pub fn print(results: &[BenchResult], threads: usize) {
         );
     }
 }
+
+/// Times the tracker's per-frame step (scene map + registration + quality, per object)
+/// on `frames` frames of a dataset from `first_frame`, every object started at its
+/// ground-truth pose; frames are decoded beforehand. Returns the times (ms) of object
+/// 0 per frame, over `passes` passes.
+pub fn tracking_ms(
+    config: &crate::io::tracker_config::TrackerConfig,
+    job: &BenchJob,
+    first_frame: usize,
+    half: bool,
+) -> Result<Vec<f64>> {
+    use super::tracking::{StepOutput, load_tracker, track_frame};
+    let camera = read_camera(&job.camera)?;
+    let dataset = TumDataset::open(&job.dataset).with_context(|| format!("opening {}", job.dataset.display()))?;
+    let mut loader = FrameLoader::new(camera, half);
+    let cam = loader.camera();
+    let mut decoded = Vec::new();
+    for entry in dataset.frames.iter().skip(first_frame).take(job.frames) {
+        let f = loader.load(entry)?;
+        decoded.push(Decoded { stamp_ns: f.stamp_ns, rgb: f.rgb.to_vec(), depth: f.depth.to_vec() });
+    }
+    if decoded.is_empty() {
+        bail!("no frames after --first-frame {first_frame}");
+    }
+    let mut tracker = load_tracker(config, cam.width as usize, cam.height as usize)?;
+    let world_from_model: Vec<Pose> = config
+        .objects
+        .iter()
+        .map(|o| crate::model::load(&o.model).map(|m| m.world_from_model()))
+        .collect::<Result<_, _>>()?;
+    let gt = dataset
+        .groundtruth
+        .as_ref()
+        .context("the tracking benchmark starts at ground truth: groundtruth.txt needed")?;
+    let pool = super::dataset::thread_pool(job.threads)?;
+    let mut out = StepOutput::new(tracker.len());
+    let mut ms = Vec::new();
+    for _ in 0..job.passes {
+        let start =
+            gt.interpolate(decoded[0].stamp_ns as f64 * 1e-9, 0.05).context("no ground truth at the first frame")?;
+        for (k, w) in world_from_model.iter().enumerate() {
+            tracker.reinitialise(k, &(start.inverse() * w));
+        }
+        for d in &decoded {
+            let frame = RgbdFrame::new(d.stamp_ns, cam, &d.rgb, &d.depth)?;
+            track_frame(&mut tracker, &pool, &frame, &mut out);
+            ms.push(f64::from(out.build_ms[0] + out.register_ms[0]));
+        }
+    }
+    Ok(ms)
+}

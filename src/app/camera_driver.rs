@@ -2,6 +2,7 @@
 //! iceoryx2, frame by frame, written straight into loaned shared-memory samples, and
 //! notifies an event so that subscribers wake up.
 
+use super::report::log_line;
 use crate::io::camera_file::read_camera;
 use crate::io::frames::FrameLoader;
 use crate::io::ipc::{self, FrameSize, Ipc, IpcError, now_ns};
@@ -109,12 +110,12 @@ fn publish<F: WireFrame>(
     let mut summary = CameraSummary { sent: 0, unreadable: 0, signalled: false };
     let mut next = Instant::now();
     let mut index = 0usize;
-    eprintln!(
+    log_line(format_args!(
         "camera: publishing {} frames of {} on {name}{}",
         frames.len(),
         job.dataset.display(),
         if job.repeat { ", repeating" } else { "" }
-    );
+    ));
     loop {
         if index == frames.len() {
             if !job.repeat {
@@ -147,7 +148,7 @@ fn publish<F: WireFrame>(
                     write_frame(loan, &header, f.rgb, f.depth)
                 }
                 Err(e) => {
-                    eprintln!("camera: skipping frame {}: {e}", format_stamp(entry.depth_stamp_ns));
+                    log_line(format_args!("camera: skipping frame {}: {e}", format_stamp(entry.depth_stamp_ns)));
                     summary.unreadable += 1;
                     continue;
                 }

@@ -4,10 +4,12 @@
 pub mod bench;
 pub mod camera_driver;
 pub mod dataset;
+pub mod demo;
 pub mod mapper;
 pub mod model_cmd;
 pub mod odometry;
 pub mod poses_client;
+pub mod quality_eval;
 pub mod render;
 pub mod report;
 pub mod track_dataset;

@@ -1,7 +1,7 @@
 //! `mrsmap poses`: a control-stack client that reads the tracker's poses, prints them
 //! and optionally writes TUM trajectories — the example a robot integrator copies.
 
-use super::report::percentile;
+use super::report::{log_line, percentile};
 use crate::geometry::Pose;
 use crate::io::ipc::{self, IpcError, now_ns};
 use crate::io::tum::{format_pose_line, format_stamp};
@@ -78,7 +78,7 @@ pub fn run(job: &PosesJob) -> Result<PosesSummary> {
                     return Err(e).context("no tracker publishes poses there (is `mrsmap track` running?)");
                 }
                 if started.elapsed() < Duration::from_millis(300) {
-                    eprintln!("poses: waiting for the tracker to open {}", job.service);
+                    log_line(format_args!("poses: waiting for the tracker to open {}", job.service));
                 }
                 if node.wait(Duration::from_millis(200)).is_err() {
                     return Ok(PosesSummary::default());
@@ -91,14 +91,16 @@ pub fn run(job: &PosesJob) -> Result<PosesSummary> {
     let entries: Vec<_> = (0..ipc::MAX_OBJECTS).map_while(|k| reader.entry::<ObjectPose>(&k).ok()).collect();
     let listener = events.listener_builder().create().map_err(|e| IpcError::new("pose listener", e))?;
     let mut seen = vec![0u64; entries.len()];
+    log_line(format_args!("poses: reading {} ({} object(s))", job.service, entries.len()));
     let mut summary = PosesSummary::default();
     let mut trajectories: BTreeMap<String, String> = BTreeMap::new();
     let mut last = Instant::now();
     'outer: loop {
-        listener.timed_wait(|_| {}, Duration::from_millis(200)).map_err(|e| IpcError::new("waiting for poses", e))?;
+        let waited = listener.timed_wait(|_| {}, Duration::from_millis(200));
         if node.wait(Duration::ZERO).is_err() {
             break;
         }
+        waited.map_err(|e| IpcError::new("waiting for poses", e))?;
         for (k, entry) in entries.iter().enumerate() {
             let pose = *entry.get();
             if pose.publish_stamp_ns == seen[k] || pose.frame_send_stamp_ns == 0 {
@@ -123,7 +125,10 @@ pub fn run(job: &PosesJob) -> Result<PosesSummary> {
 
 fn handle(job: &PosesJob, p: &ObjectPose, summary: &mut PosesSummary, trajectories: &mut BTreeMap<String, String>) {
     if p.layout_version != LAYOUT_VERSION {
-        eprintln!("poses: message with layout version {} ignored (expected {LAYOUT_VERSION})", p.layout_version);
+        log_line(format_args!(
+            "poses: message with layout version {} ignored (expected {LAYOUT_VERSION})",
+            p.layout_version
+        ));
         return;
     }
     summary.received += 1;

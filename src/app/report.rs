@@ -23,3 +23,10 @@ pub fn progress_bar(len: u64, what: &str) -> ProgressBar {
     bar.set_message(what.to_string());
     bar
 }
+
+/// Writes a line to stderr, ignoring failure: a process that outlives its log reader
+/// (a closed pipe) must keep running rather than panic as `eprintln!` would.
+pub fn log_line(args: std::fmt::Arguments) {
+    use std::io::Write as _;
+    let _ = writeln!(std::io::stderr().lock(), "{args}");
+}

@@ -8,7 +8,7 @@
 //! listener's timed wait none. The wait times out every 250 ms to notice signals and an
 //! idle camera.
 
-use super::report::percentile;
+use super::report::{log_line, percentile};
 use super::tracking::{StepOutput, invalid_frame, load_tracker, pose_message, track_frame};
 use crate::io::ipc::{self, FrameSize, Ipc, IpcError, now_ns};
 use crate::io::tracker_config::TrackerConfig;
@@ -156,15 +156,16 @@ impl<F: WireFrame> LiveTracker<F> {
         };
         let mut last_frame = Instant::now();
         let mut waiting_reported = false;
+        log_line(format_args!("tracker: ready; {} object(s), waiting for frames", self.core.names.len()));
         loop {
             // Blocks until the driver notifies (or 250 ms pass); no polling.
-            self.listener
-                .timed_wait(|_| {}, Duration::from_millis(250))
-                .map_err(|e| IpcError::new("waiting for frames", e))?;
+            // A signal interrupts the wait: that is not an error but the stop request.
+            let waited = self.listener.timed_wait(|_| {}, Duration::from_millis(250));
             if self.node.wait(Duration::ZERO).is_err() {
                 summary.stop = StopReason::Signal;
                 break;
             }
+            waited.map_err(|e| IpcError::new("waiting for frames", e))?;
             if self.core.process_newest(&mut summary, observer)? {
                 last_frame = Instant::now();
                 waiting_reported = false;
@@ -173,7 +174,7 @@ impl<F: WireFrame> LiveTracker<F> {
                     break;
                 }
             } else if last_frame.elapsed() > Duration::from_secs(2) && !waiting_reported {
-                eprintln!("tracker: no frame for 2 s (is the camera driver running?); waiting");
+                log_line(format_args!("tracker: no frame for 2 s (is the camera driver running?); waiting"));
                 waiting_reported = true;
             }
             if limits.idle_timeout.is_some_and(|t| last_frame.elapsed() > t) {
@@ -220,10 +221,10 @@ impl<F: WireFrame> Core<F> {
             }
             Err(e) => {
                 if summary.invalid_frames == 0 {
-                    eprintln!(
+                    log_line(format_args!(
                         "tracker: frame {} refused: {e} (reported as invalid; further ones are counted)",
                         header.sequence
-                    );
+                    ));
                 }
                 invalid_frame(&self.tracker, header.capture_stamp_ns, &mut self.out);
                 summary.invalid_frames += 1;

@@ -108,6 +108,12 @@ pub struct TrackArgs {
     /// Stop after this many frames (live mode).
     #[arg(long)]
     pub max_frames: Option<u64>,
+    /// Override the config's camera.service.
+    #[arg(long)]
+    pub camera_service: Option<String>,
+    /// Override the config's poses.service.
+    #[arg(long)]
+    pub poses_service: Option<String>,
     /// Stop after this many seconds without a frame (live mode).
     #[arg(long)]
     pub idle_timeout: Option<f64>,
@@ -186,6 +192,9 @@ pub enum ModelCommand {
 
 #[derive(Subcommand)]
 pub enum EvalCommand {
+    /// How well the tracker's quality signal detects failed registrations: precision and
+    /// recall against ground truth, from priors perturbed at random.
+    TrackingQuality(QualityArgs),
     /// Relative pose error (translation) at a fixed frame delta.
     Rpe {
         /// Reference trajectory (e.g. groundtruth.txt).
@@ -234,7 +243,67 @@ pub struct BenchArgs {
     /// Key views of the synthetic pose graph whose optimisation step is also timed.
     #[arg(long, default_value_t = 100)]
     pub graph_key_views: usize,
+    /// Also time object tracking with this tracker configuration (frames from
+    /// --tracking-first-frame, objects started at their ground-truth pose).
+    #[arg(long)]
+    pub tracking_config: Option<PathBuf>,
+    /// First frame of the tracking benchmark (the teddy model was learned from 0–99).
+    #[arg(long, default_value_t = 100)]
+    pub tracking_first_frame: usize,
     /// Resolution factor λ of the maps (see `odometry --help`).
     #[arg(long, default_value_t = 0.01)]
     pub lambda: f64,
+}
+
+#[derive(Args)]
+pub struct DemoArgs {
+    /// Tracker configuration.
+    #[arg(long, default_value = "robot_config/tracker.toml")]
+    pub config: PathBuf,
+    /// Dataset the camera driver publishes (the repository ships an 8-frame clip).
+    #[arg(long, default_value = "tests/data/fr3_teddy_8")]
+    pub dataset: PathBuf,
+    /// Camera file of the dataset.
+    #[arg(long, default_value = "robot_config/cameras/tum_fr3.toml")]
+    pub camera: PathBuf,
+    /// Frames per second the driver sends.
+    #[arg(long, default_value_t = 10.0)]
+    pub rate: f64,
+}
+
+#[derive(Args)]
+pub struct QualityArgs {
+    /// Tracker configuration (object 0 is measured).
+    #[arg(long)]
+    pub config: PathBuf,
+    /// Dataset with groundtruth.txt.
+    #[arg(long)]
+    pub dataset: PathBuf,
+    /// Camera file of the dataset.
+    #[arg(long)]
+    pub camera: PathBuf,
+    /// First frame (the teddy model was learned from frames 0–99).
+    #[arg(long, default_value_t = 100)]
+    pub first_frame: usize,
+    /// Frames used.
+    #[arg(long, default_value_t = 100)]
+    pub frames: usize,
+    /// Perturbed registrations per frame.
+    #[arg(long, default_value_t = 6)]
+    pub trials: usize,
+    /// Largest prior shift per axis (m).
+    #[arg(long, default_value_t = 0.06)]
+    pub max_shift: f64,
+    /// Largest prior turn per axis (degrees).
+    #[arg(long, default_value_t = 8.6)]
+    pub max_turn: f64,
+    /// A result farther than this from the truth failed (mm).
+    #[arg(long, default_value_t = 50.0)]
+    pub fail_mm: f64,
+    /// … or turned more than this (degrees).
+    #[arg(long, default_value_t = 8.0)]
+    pub fail_deg: f64,
+    /// Random seed.
+    #[arg(long, default_value_t = 3)]
+    pub seed: u64,
 }

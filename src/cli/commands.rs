@@ -28,7 +28,13 @@ pub fn seconds(value: Option<f64>, flag: &str) -> Result<Option<std::time::Durat
 
 /// `mrsmap track`: live, or over a dataset.
 pub fn track(a: TrackArgs) -> Result<()> {
-    let config = mrsmap::io::tracker_config::read_tracker_config(&a.config)?;
+    let mut config = mrsmap::io::tracker_config::read_tracker_config(&a.config)?;
+    if let Some(s) = a.camera_service {
+        config.camera_service = s;
+    }
+    if let Some(s) = a.poses_service {
+        config.poses_service = s;
+    }
     if let Some(dataset) = a.dataset {
         let camera = a.camera.ok_or_else(|| anyhow::anyhow!("--dataset needs --camera (the dataset's camera file)"))?;
         let job = app::track_dataset::TrackDatasetJob {
@@ -160,6 +166,23 @@ pub fn poses(a: PosesArgs) -> Result<()> {
 /// `mrsmap eval …`.
 pub fn eval(command: EvalCommand) -> Result<()> {
     match command {
+        EvalCommand::TrackingQuality(a) => {
+            let config = mrsmap::io::tracker_config::read_tracker_config(&a.config)?;
+            let job = app::quality_eval::QualityJob {
+                dataset: a.dataset,
+                camera: a.camera,
+                first_frame: a.first_frame,
+                frames: a.frames,
+                trials: a.trials,
+                max_shift_m: a.max_shift,
+                max_turn_rad: a.max_turn.to_radians(),
+                fail_mm: a.fail_mm,
+                fail_deg: a.fail_deg,
+                seed: a.seed,
+            };
+            let trials = app::quality_eval::run(&config, &job)?;
+            app::quality_eval::print(&job, &trials, config.params.min_quality);
+        }
         EvalCommand::Rpe { gt, est, delta, max_diff } => {
             let (g, e) = (Trajectory::read(&gt)?, Trajectory::read(&est)?);
             let (r, p) = associate(&g, &e, max_diff)?;
@@ -191,6 +214,25 @@ pub fn bench(a: BenchArgs) -> Result<()> {
     let results = app::bench::run(&job)?;
     let threads = a.threads.unwrap_or_else(rayon::current_num_threads);
     app::bench::print(&results, threads);
+    if let Some(path) = &a.tracking_config {
+        let config = mrsmap::io::tracker_config::read_tracker_config(path)?;
+        println!(
+            "\n| tracking (object '{}') | threads | frames | per frame median / p99 (ms) |",
+            config.objects[0].name
+        );
+        println!("|---|---|---|---|");
+        for &res in &job.resolutions {
+            let half = res == app::bench::Resolution::Qvga;
+            let ms = app::bench::tracking_ms(&config, &job, a.tracking_first_frame, half)?;
+            println!(
+                "| {} | {threads} | {} | {:.2} / {:.2} |",
+                if half { "QVGA 320×240" } else { "VGA 640×480" },
+                ms.len(),
+                app::report::percentile(&ms, 0.5),
+                app::report::percentile(&ms, 0.99)
+            );
+        }
+    }
     let (edges, ms) = app::bench::graph_step_ms(job.graph_key_views, 50);
     println!(
         "\npose-graph step (synthetic, {} key views, {edges} edges, 50 on-line steps): median {:.2} ms, p99 {:.2} ms",
@@ -199,4 +241,9 @@ pub fn bench(a: BenchArgs) -> Result<()> {
         app::report::percentile(&ms, 0.99)
     );
     Ok(())
+}
+
+/// `mrsmap demo`.
+pub fn demo(a: DemoArgs) -> Result<()> {
+    app::demo::run(&app::demo::DemoJob { config: a.config, dataset: a.dataset, camera: a.camera, rate_hz: a.rate })
 }

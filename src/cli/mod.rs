@@ -23,6 +23,11 @@ pub struct Cli {
 
 #[derive(Subcommand)]
 pub enum Command {
+    /// The tracker and a camera driver as two processes on the 8 real frames the
+    /// repository ships: every pose printed with its error against motion capture.
+    ///
+    /// Run it from the repository root (the defaults are relative paths).
+    Demo(DemoArgs),
     /// Frame-to-frame RGB-D odometry over a TUM RGB-D dataset; writes a TUM trajectory.
     ///
     /// Each frame's surfel map is registered to the previous frame's map and the poses
@@ -77,6 +82,7 @@ pub enum Command {
 /// Runs a subcommand.
 pub fn run(command: Command) -> Result<()> {
     match command {
+        Command::Demo(a) => commands::demo(a),
         Command::Odometry(a) => commands::odometry(a),
         Command::Map(a) => commands::map(a),
         Command::Model(c) => commands::model(c),

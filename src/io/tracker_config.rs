@@ -18,7 +18,8 @@
 //! min_quality = 0.5
 //! min_quality_initialise = 0.6
 //! lost_after_frames = 3
-//! lm_max_iterations = 20
+//! lm_max_iterations = 10
+//! newton_iterations = 2
 //! coarsest_level = 4
 //!
 //! [[object]]
@@ -135,6 +136,7 @@ struct RawTracker {
     min_quality_initialise: Option<f64>,
     lost_after_frames: Option<u32>,
     lm_max_iterations: Option<usize>,
+    newton_iterations: Option<usize>,
     coarsest_level: Option<usize>,
 }
 
@@ -171,6 +173,7 @@ pub fn parse_tracker_config(text: &str, origin: &Path) -> Result<TrackerConfig, 
     params.min_quality_initialise = t.min_quality_initialise.unwrap_or(params.min_quality_initialise);
     params.lost_after_frames = t.lost_after_frames.unwrap_or(params.lost_after_frames);
     params.registration.lm_max_iterations = t.lm_max_iterations.unwrap_or(params.registration.lm_max_iterations);
+    params.registration.newton_iterations = t.newton_iterations.unwrap_or(params.registration.newton_iterations);
     params.registration.coarsest_level = t.coarsest_level.unwrap_or(params.registration.coarsest_level);
     params.validate().map_err(|e| invalid(e.to_string()))?;
     params.map.validate().map_err(|e| invalid(e.to_string()))?;

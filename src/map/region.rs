@@ -70,6 +70,8 @@ pub struct PixelGate {
     pub max_mahalanobis2: f32,
     /// The volume of interest, if any.
     pub volume: Option<GateVolume>,
+    /// Points outside this box (min, max corner; object frame) are dropped first.
+    pub bounds: (Vector3<f32>, Vector3<f32>),
 }
 
 impl PixelGate {
@@ -77,6 +79,10 @@ impl PixelGate {
     #[inline]
     pub fn keeps(&self, p: &Vector3<f32>) -> bool {
         let q = self.rotation * p + self.translation;
+        let (lo, hi) = &self.bounds;
+        if q.x < lo.x || q.y < lo.y || q.z < lo.z || q.x > hi.x || q.y > hi.y || q.z > hi.z {
+            return false;
+        }
         let d = q - self.mean;
         if d.dot(&(self.inverse_covariance * d)) > self.max_mahalanobis2 {
             return false;
@@ -127,6 +133,7 @@ mod tests {
                 min_z: 0.01,
                 max_z: 0.5,
             }),
+            bounds: (Vector3::repeat(-1.0), Vector3::repeat(1.0)),
         };
         assert!(gate.keeps(&Vector3::new(0.0, 0.0, 1.1)));
         assert!(!gate.keeps(&Vector3::new(0.0, 0.0, 1.0)), "on the support plane: below min_z");

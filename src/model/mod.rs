@@ -198,7 +198,14 @@ impl Model {
         let [xx, xy, xz, yy, yz, zz] = r.covariance;
         let covariance = nalgebra::Matrix3::new(xx, xy, xz, xy, yy, yz, xz, yz, zz);
         let volume = self.header.volume.as_ref().map(|v| &v.shape);
-        crate::tracking::ModelExtent::new(nalgebra::Vector3::from(r.mean), covariance, volume)
+        // The box of the usable surfels' means, grown by the finest cell size.
+        let margin = self.map.resolution(0);
+        let (lo, hi) = self.map.surfels().iter().filter(|s| s.usable()).fold(
+            (nalgebra::Vector3::repeat(f64::INFINITY), nalgebra::Vector3::repeat(f64::NEG_INFINITY)),
+            |(lo, hi), s| (lo.inf(&s.mean.cast()), hi.sup(&s.mean.cast())),
+        );
+        let bounds = (lo.add_scalar(-margin), hi.add_scalar(margin));
+        crate::tracking::ModelExtent::new(nalgebra::Vector3::from(r.mean), covariance, volume, bounds)
     }
 
     /// `world_from_model` of the header as a pose.

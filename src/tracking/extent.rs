@@ -34,14 +34,18 @@ pub struct ModelExtent {
     volume: Option<GateVolume>,
     /// Bounding box of the volume (object frame), if any.
     volume_box: Option<(Vector3<f64>, Vector3<f64>)>,
+    /// Bounding box of the model's surfels (object frame), grown by a margin.
+    bounds: (Vector3<f64>, Vector3<f64>),
 }
 
 impl ModelExtent {
-    /// From the root statistics (mean, covariance) and the volume of interest.
+    /// From the root statistics (mean, covariance), the volume of interest and the
+    /// bounding box of the model's points (`bounds`: min and max corner, object frame).
     pub fn new(
         mean: Vector3<f64>,
         covariance: Matrix3<f64>,
         volume: Option<&VolumeShape>,
+        bounds: (Vector3<f64>, Vector3<f64>),
     ) -> Result<Self, ExtentError> {
         let covariance = (covariance + covariance.transpose()) * 0.5;
         let inverse_covariance = covariance
@@ -67,7 +71,7 @@ impl ModelExtent {
                 (Some(GateVolume::Box { half_extents: half_extents.map(|v| v as f32) }), Some((-h, h)))
             }
         };
-        Ok(ModelExtent { mean, covariance, inverse_covariance, volume, volume_box })
+        Ok(ModelExtent { mean, covariance, inverse_covariance, volume, volume_box, bounds })
     }
 
     /// The gate at `object_from_camera`: points inside the volume and within
@@ -80,6 +84,7 @@ impl ModelExtent {
             inverse_covariance: self.inverse_covariance.cast(),
             max_mahalanobis2: max_mahalanobis2 as f32,
             volume: self.volume.clone(),
+            bounds: (self.bounds.0.cast(), self.bounds.1.cast()),
         }
     }
 
@@ -87,6 +92,8 @@ impl ModelExtent {
     fn gate_box(&self, max_mahalanobis2: f64) -> (Vector3<f64>, Vector3<f64>) {
         let half = Vector3::from_fn(|i, _| (max_mahalanobis2 * self.covariance[(i, i)]).sqrt());
         let (mut lo, mut hi) = (self.mean - half, self.mean + half);
+        lo = lo.sup(&self.bounds.0);
+        hi = hi.inf(&self.bounds.1);
         if let Some((vlo, vhi)) = &self.volume_box {
             lo = lo.sup(vlo);
             hi = hi.inf(vhi);
@@ -145,7 +152,8 @@ mod tests {
     #[test]
     fn the_region_frames_the_object_and_the_whole_image_when_too_close() {
         let shape = VolumeShape::Box { half_extents: [0.1, 0.1, 0.1] };
-        let e = ModelExtent::new(Vector3::zeros(), Matrix3::identity() * 0.01, Some(&shape)).expect("extent");
+        let wide = (Vector3::repeat(-1.0), Vector3::repeat(1.0));
+        let e = ModelExtent::new(Vector3::zeros(), Matrix3::identity() * 0.01, Some(&shape), wide).expect("extent");
         // Camera 1 m in front of the object, looking at it (object at camera z = 1).
         let object_from_camera = Pose::from_parts(Translation3::new(0.0, 0.0, -1.0), UnitQuaternion::identity());
         let r =
@@ -161,6 +169,7 @@ mod tests {
     #[test]
     fn a_flat_model_is_refused() {
         let flat = Matrix3::from_diagonal(&Vector3::new(0.01, 0.01, 0.0));
-        assert_eq!(ModelExtent::new(Vector3::zeros(), flat, None), Err(ExtentError::Covariance));
+        let b = (Vector3::repeat(-1.0), Vector3::repeat(1.0));
+        assert_eq!(ModelExtent::new(Vector3::zeros(), flat, None, b), Err(ExtentError::Covariance));
     }
 }

@@ -26,6 +26,14 @@ pub enum TrackerError {
     /// No object to track.
     #[error("no object to track")]
     NoObjects,
+    /// The registration parameters do not fit a model.
+    #[error("object '{name}': {source}")]
+    Registration {
+        /// Object name.
+        name: String,
+        /// Cause.
+        source: crate::registration::RegistrationParamsError,
+    },
 }
 
 /// Tracks objects in RGB-D frames. Everything is allocated in [`Tracker::new`]; a step
@@ -54,6 +62,10 @@ impl Tracker {
         let mut objects = Vec::with_capacity(models.len());
         let mut names = Vec::with_capacity(models.len());
         for m in models {
+            params
+                .registration
+                .validate(m.map.num_levels())
+                .map_err(|source| TrackerError::Registration { name: m.name.clone(), source })?;
             let model_params = m.map.params();
             let scene_params = MapParams {
                 finest_resolution_m: model_params.finest_resolution_m,

@@ -1,0 +1,121 @@
+#!/usr/bin/env python3
+"""An independent camera driver and pose reader in Python (iceoryx2 from PyPI), written
+only from docs/wire-format.md: publishes the frames of a TUM clip to `mrsmap track` and
+reads the poses back from the blackboard. Exits non-zero unless every frame is tracked.
+
+    pip install iceoryx2==0.10.0 numpy pillow
+    mrsmap track --config robot_config/tracker.toml &
+    scripts/python_driver.py tests/data/fr3_teddy_8 --service mrsmap/camera0 --poses mrsmap/poses
+"""
+import argparse, ctypes, pathlib, sys, time
+
+import iceoryx2 as iox2
+import numpy as np
+from PIL import Image
+
+
+class FrameHeader(ctypes.Structure):
+    _fields_ = [("layout_version", ctypes.c_uint32), ("width", ctypes.c_uint32),
+                ("height", ctypes.c_uint32), ("reserved", ctypes.c_uint32),
+                ("capture_stamp_ns", ctypes.c_uint64), ("send_stamp_ns", ctypes.c_uint64),
+                ("sequence", ctypes.c_uint64), ("fx", ctypes.c_double), ("fy", ctypes.c_double),
+                ("cx", ctypes.c_double), ("cy", ctypes.c_double),
+                ("distortion", ctypes.c_double * 5), ("depth_scale_m", ctypes.c_double)]
+
+    @staticmethod
+    def type_name() -> str:
+        return "MrsmapFrameHeader"
+
+
+class RgbdFrameVga(ctypes.Structure):
+    _fields_ = [("header", FrameHeader), ("rgb", ctypes.c_uint8 * (640 * 480 * 3)),
+                ("depth", ctypes.c_uint16 * (640 * 480))]
+
+    @staticmethod
+    def type_name() -> str:
+        return "MrsmapRgbdFrameVga"
+
+
+class ObjectPose(ctypes.Structure):
+    _fields_ = [("layout_version", ctypes.c_uint32), ("object_id", ctypes.c_uint32),
+                ("frame_stamp_ns", ctypes.c_uint64), ("frame_sequence", ctypes.c_uint64),
+                ("frame_send_stamp_ns", ctypes.c_uint64), ("publish_stamp_ns", ctypes.c_uint64),
+                ("translation_m", ctypes.c_double * 3), ("rotation_xyzw", ctypes.c_double * 4),
+                ("covariance", ctypes.c_double * 36), ("quality", ctypes.c_double),
+                ("status", ctypes.c_uint32), ("bad_frames", ctypes.c_uint32),
+                ("associations", ctypes.c_uint32), ("iterations", ctypes.c_uint32),
+                ("build_ms", ctypes.c_float), ("register_ms", ctypes.c_float),
+                ("total_ms", ctypes.c_float), ("reserved", ctypes.c_uint32),
+                ("name", ctypes.c_uint8 * 32)]
+
+    @staticmethod
+    def type_name() -> str:
+        return "MrsmapObjectPose"
+
+
+def frames(root: pathlib.Path):
+    for line in (root / "associations.txt").read_text().splitlines():
+        if line.startswith("#") or not line.strip():
+            continue
+        _, rgb, t_depth, depth = line.split()
+        yield int(round(float(t_depth) * 1e9)), root / rgb, root / depth
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("dataset", type=pathlib.Path)
+    ap.add_argument("--service", default="mrsmap/camera0")
+    ap.add_argument("--poses", default="mrsmap/poses")
+    args = ap.parse_args()
+    assert ctypes.sizeof(FrameHeader) == 120 and ctypes.sizeof(ObjectPose) == 456
+
+    node = iox2.NodeBuilder.new().create(iox2.ServiceType.Ipc)
+    name = iox2.ServiceName.new(args.service + "/rgbd/vga")
+    service = (node.service_builder(name).publish_subscribe(RgbdFrameVga)
+               .enable_safe_overflow(True).subscriber_max_buffer_size(1)
+               .subscriber_max_borrowed_samples(2).history_size(0)
+               .max_publishers(2).max_subscribers(8).open_or_create())
+    events = node.service_builder(name).event().max_notifiers(4).max_listeners(16).open_or_create()
+    publisher = service.publisher_builder().create()
+    notifier = events.notifier_builder().create()
+
+    poses_name = iox2.ServiceName.new(args.poses)
+    board = (node.service_builder(poses_name).blackboard_opener(ctypes.c_uint32)
+             .max_readers(16).open())
+    reader = board.reader_builder().create()
+    entry = reader.entry(ctypes.c_uint32(0), ObjectPose)
+
+    tracked = 0
+    total = 0
+    for seq, (stamp, rgb_path, depth_path) in enumerate(frames(args.dataset)):
+        rgb = np.asarray(Image.open(rgb_path).convert("RGB"), dtype=np.uint8)
+        depth = np.asarray(Image.open(depth_path), dtype=np.uint16)
+        sample = publisher.loan_uninit()
+        f = ctypes.cast(sample.payload_ptr, ctypes.POINTER(RgbdFrameVga)).contents
+        f.header = FrameHeader(1, 640, 480, 0, stamp, time.time_ns(), seq,
+                               535.4, 539.2, 320.1, 247.6, (ctypes.c_double * 5)(), 1 / 5000)
+        np.ctypeslib.as_array(f.rgb)[:] = rgb.reshape(-1)
+        np.ctypeslib.as_array(f.depth)[:] = depth.reshape(-1)
+        sample.assume_init().send()
+        notifier.notify()
+        total += 1
+        deadline = time.time() + 5
+        while time.time() < deadline:
+            pose = entry.get().decode_as(ObjectPose)
+            if pose.frame_sequence == seq and pose.frame_send_stamp_ns != 0:
+                break
+            time.sleep(0.005)
+        else:
+            print(f"frame {seq}: no pose", file=sys.stderr)
+            continue
+        name = bytes(pose.name).split(b"\0")[0].decode()
+        t = list(pose.translation_m)
+        print(f"frame {seq}: {name} status {pose.status} quality {pose.quality:.2f} "
+              f"camera_from_object t = [{t[0]:+.3f}, {t[1]:+.3f}, {t[2]:+.3f}]")
+        tracked += pose.status == 0
+    print(f"{tracked}/{total} frames tracked")
+    return 0 if tracked == total else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

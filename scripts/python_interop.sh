@@ -1,0 +1,16 @@
+#!/usr/bin/env bash
+# Interop with an independent implementation: a camera driver and pose reader written in
+# Python against docs/wire-format.md (iceoryx2 from PyPI) drives `mrsmap track`.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+python3 -m pip install --quiet --disable-pip-version-check 'iceoryx2==0.10.0' numpy pillow >/dev/null 2>&1
+cargo build --release --quiet
+OUT=$(mktemp -d)
+TAG="mrsmap_py_$$"
+trap 'kill $(jobs -p) 2>/dev/null || true; rm -rf "$OUT"' EXIT
+sed -e "s#^service = \"mrsmap/camera0\"#service = \"$TAG/camera\"#" \
+    -e "s#^service = \"mrsmap/poses\"#service = \"$TAG/poses\"#" \
+    -e "s#\"\.\./models/#\"$PWD/models/#" robot_config/tracker.toml > "$OUT/tracker.toml"
+target/release/mrsmap track --config "$OUT/tracker.toml" --idle-timeout 20 > "$OUT/tracker.txt" 2> "$OUT/tracker.err" &
+until grep -q ready "$OUT/tracker.err" 2>/dev/null; do sleep 0.1; done
+IOX2_LOG_LEVEL=Error python3 scripts/python_driver.py tests/data/fr3_teddy_8 --service "$TAG/camera" --poses "$TAG/poses"

@@ -1,0 +1,252 @@
+//! The camera driver, the tracker and the pose client as separate processes: poses
+//! against ground truth, faults (bad frames, a killed driver, missing or corrupt models),
+//! clean shutdown on SIGTERM and SIGINT.
+
+mod common;
+
+use common::*;
+use mrsmap::eval::{ErrorStats, associate, ate_translation};
+use mrsmap::io::camera_file::read_camera;
+use mrsmap::io::frames::FrameLoader;
+use mrsmap::io::ipc;
+use mrsmap::io::tracker_config::read_tracker_config;
+use mrsmap::io::tum::{Trajectory, TumDataset};
+use mrsmap::io::wire::{FrameHeader, ObjectPose, RgbdFrameVga, status, write_frame};
+use std::io::{BufRead, BufReader};
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc::{Receiver, channel};
+use std::time::Duration;
+
+/// Starts `mrsmap ARGS`, forwarding its stderr lines to a channel.
+fn start(args: &[&str]) -> (ChildGuard, Receiver<String>) {
+    let mut child = Command::new(mrsmap_bin())
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("mrsmap starts");
+    let stderr = child.stderr.take().expect("stderr");
+    let (tx, rx) = channel();
+    std::thread::spawn(move || {
+        // Keep draining even when nobody listens: a closed pipe would fail the child.
+        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+            let _ = tx.send(line);
+        }
+    });
+    (ChildGuard(child), rx)
+}
+
+/// Waits for a stderr line containing `needle`.
+fn wait_for(rx: &Receiver<String>, needle: &str, seconds: u64) -> Vec<String> {
+    let mut seen = Vec::new();
+    let deadline = std::time::Instant::now() + Duration::from_secs(seconds);
+    while let Some(left) = deadline.checked_duration_since(std::time::Instant::now()) {
+        match rx.recv_timeout(left) {
+            Ok(line) => {
+                let done = line.contains(needle);
+                seen.push(line);
+                if done {
+                    return seen;
+                }
+            }
+            Err(_) => break,
+        }
+    }
+    panic!("no line with {needle:?} within {seconds} s; saw {seen:?}");
+}
+
+fn signal(child: &Child, name: &str) {
+    let ok = Command::new("kill").args([&format!("-{name}"), &child.id().to_string()]).status().expect("kill runs");
+    assert!(ok.success());
+}
+
+/// Waits for the process to exit; returns (exit code, stdout).
+fn finish(mut guard: ChildGuard, seconds: u64) -> (Option<i32>, String) {
+    let deadline = std::time::Instant::now() + Duration::from_secs(seconds);
+    loop {
+        if let Some(status) = guard.0.try_wait().expect("wait") {
+            let mut out = String::new();
+            if let Some(mut stdout) = guard.0.stdout.take() {
+                let _ = std::io::Read::read_to_string(&mut stdout, &mut out);
+            }
+            return (status.code(), out);
+        }
+        assert!(std::time::Instant::now() < deadline, "process did not exit within {seconds} s");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+fn path(p: &Path) -> &str {
+    p.to_str().expect("utf-8 path")
+}
+
+#[test]
+fn driver_tracker_and_client_as_processes() {
+    let dir = temp_dir("processes");
+    let config_path = write_tracker_config(&dir, "e2e", "");
+    let config = read_tracker_config(&config_path).expect("config");
+    let traj = dir.join("poses.txt");
+    let (tracker, tracker_err) = start(&["track", "--config", path(&config_path)]);
+    wait_for(&tracker_err, "ready", 60);
+    let (client, client_err) =
+        start(&["poses", "--service", &config.poses_service, "--out", path(&traj), "--count", "8", "--timeout", "30"]);
+    wait_for(&client_err, "reading", 30);
+    let (clip, camera_file) = (teddy_clip(), fr3_camera_file());
+    let (camera, _) = start(&[
+        "camera",
+        "--dataset",
+        path(&clip),
+        "--camera",
+        path(&camera_file),
+        "--service",
+        &config.camera_service,
+        "--rate",
+        "10",
+    ]);
+    assert_eq!(finish(camera, 60).0, Some(0), "the driver sends 8 frames and exits");
+    let (code, out) = finish(client, 60);
+    assert_eq!(code, Some(0), "client: {out}");
+    assert!(out.contains("8 tracking"), "{out}");
+    // The poses against the motion-capture ground truth (TUM ATE: object_from_camera
+    // trajectory aligned rigidly to world_from_camera).
+    let estimate = Trajectory::read(&traj).expect("client wrote the trajectory");
+    let gt = Trajectory::read(&teddy_clip().join("groundtruth.txt")).expect("gt");
+    let (r, e) = associate(&gt, &estimate, 0.02).expect("stamps match");
+    let ate = ErrorStats::of(&ate_translation(&r, &e).expect("ate"));
+    println!("ATE over {} poses: median {:.2} mm, max {:.2} mm", ate.count, ate.median * 1e3, ate.max * 1e3);
+    assert_eq!(ate.count, 8);
+    assert!(ate.max < 0.01, "max {:.2} mm", ate.max * 1e3);
+    signal(&tracker.0, "TERM");
+    let (code, out) = finish(tracker, 30);
+    assert_eq!(code, Some(0), "clean shutdown on SIGTERM: {out}");
+    assert!(out.contains("8 frames") && out.contains("stopped by signal"), "{out}");
+}
+
+/// Publishes frames from this test process, as a misbehaving driver would.
+struct TestDriver {
+    _node: iceoryx2::node::Node<ipc::Ipc>,
+    publisher: iceoryx2::port::publisher::Publisher<ipc::Ipc, RgbdFrameVga, ()>,
+    notifier: iceoryx2::port::notifier::Notifier<ipc::Ipc>,
+    rgb: Vec<u8>,
+    depth: Vec<u16>,
+    header: FrameHeader,
+}
+
+impl TestDriver {
+    fn new(camera_service: &str) -> Self {
+        let node = ipc::node("test_driver").expect("node");
+        let name = ipc::FrameSize::Vga.service(camera_service);
+        let service = ipc::frames::<RgbdFrameVga>(&node, &name).expect("frames");
+        let events = ipc::events(&node, &name).expect("events");
+        let publisher = service.publisher_builder().create().expect("publisher");
+        let notifier = events.notifier_builder().create().expect("notifier");
+        let dataset = TumDataset::open(&teddy_clip()).expect("clip");
+        let camera = read_camera(&fr3_camera_file()).expect("camera");
+        let mut loader = FrameLoader::new(camera, false);
+        let f = loader.load(&dataset.frames[0]).expect("frame");
+        let header = FrameHeader::for_camera(&camera, f.stamp_ns, 0);
+        TestDriver { _node: node, publisher, notifier, rgb: f.rgb.to_vec(), depth: f.depth.to_vec(), header }
+    }
+
+    /// Sends the clip's first frame with `sequence`, after `damage` changed it.
+    fn send(&self, sequence: u64, damage: impl FnOnce(&mut RgbdFrameVga)) {
+        let header = FrameHeader { sequence, send_stamp_ns: ipc::now_ns(), ..self.header };
+        let loan = self.publisher.loan_uninit().expect("loan");
+        let mut sample = write_frame(loan, &header, &self.rgb, &self.depth).expect("fits");
+        damage(sample.payload_mut());
+        sample.send().expect("send");
+        self.notifier.notify().expect("notify");
+    }
+}
+
+fn read_pose(reader: &iceoryx2::port::reader::EntryHandle<ipc::Ipc, u32, ObjectPose>, sequence: u64) -> ObjectPose {
+    for _ in 0..200 {
+        let p = *reader.get();
+        if p.frame_sequence == sequence && p.frame_send_stamp_ns != 0 {
+            return p;
+        }
+        std::thread::sleep(Duration::from_millis(25));
+    }
+    panic!("no pose for frame {sequence}");
+}
+
+#[test]
+fn bad_frames_are_reported_invalid_and_a_killed_driver_is_survived() {
+    let dir = temp_dir("faults");
+    let config_path = write_tracker_config(&dir, "faults", "");
+    let config = read_tracker_config(&config_path).expect("config");
+    let (tracker, tracker_err) = start(&["track", "--config", path(&config_path)]);
+    wait_for(&tracker_err, "ready", 60);
+    let driver = TestDriver::new(&config.camera_service);
+    let node = ipc::node("test_reader").expect("node");
+    let poses = ipc::open_poses(&node, &config.poses_service).expect("the tracker created the blackboard");
+    let reader = poses.reader_builder().create().expect("reader");
+    let entry = reader.entry::<ObjectPose>(&0).expect("object 0");
+    let mut sequence = 0;
+    let mut send = |damage: &dyn Fn(&mut RgbdFrameVga)| {
+        sequence += 1;
+        driver.send(sequence, damage);
+        read_pose(&entry, sequence).status
+    };
+    assert_eq!(send(&|_| {}), status::TRACKING, "a good frame is tracked");
+    assert_eq!(send(&|f| f.header.layout_version = 99), status::INVALID_FRAME, "another layout version");
+    assert_eq!(send(&|f| f.header.fx = f64::NAN), status::INVALID_FRAME, "NaN intrinsics");
+    assert_eq!(send(&|f| f.header.width = 320), status::INVALID_FRAME, "a header that disagrees with the message size");
+    assert_eq!(send(&|f| f.depth.fill(0)), status::INVALID_FRAME, "all-zero depth");
+    assert_eq!(send(&|_| {}), status::TRACKING, "tracking resumes");
+    drop(driver);
+    // A real driver, killed mid-stream and restarted: the tracker keeps going.
+    let (clip, camera_file) = (teddy_clip(), fr3_camera_file());
+    let camera_args = [
+        "camera",
+        "--dataset",
+        path(&clip),
+        "--camera",
+        path(&camera_file),
+        "--service",
+        &config.camera_service,
+        "--loop",
+        "--rate",
+        "20",
+    ];
+    let (camera, _) = start(&camera_args);
+    std::thread::sleep(Duration::from_millis(1500));
+    signal(&camera.0, "KILL");
+    drop(camera);
+    let before = entry.get().publish_stamp_ns;
+    std::thread::sleep(Duration::from_millis(500));
+    let (camera, _) = start(&camera_args);
+    std::thread::sleep(Duration::from_millis(1500));
+    let after = *entry.get();
+    assert!(after.publish_stamp_ns > before, "poses resume after the driver restarts");
+    assert_eq!(after.status, status::TRACKING);
+    drop(camera);
+    signal(&tracker.0, "INT");
+    let (code, out) = finish(tracker, 30);
+    assert_eq!(code, Some(0), "clean shutdown on SIGINT: {out}");
+    assert!(out.contains("refused as invalid"), "{out}");
+}
+
+#[test]
+fn missing_or_corrupt_models_stop_the_tracker_at_start_with_a_clear_error() {
+    let dir = temp_dir("bad-models");
+    let config_path = write_tracker_config(&dir, "bad", "");
+    let text = std::fs::read_to_string(&config_path).expect("config");
+    let model = root().join("models/teddy.mrsm");
+    let missing = text.replace(model.to_str().expect("utf-8"), "/no/such/teddy.mrsm");
+    std::fs::write(&config_path, missing).expect("write");
+    let out = Command::new(mrsmap_bin()).args(["track", "--config", path(&config_path)]).output().expect("runs");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("/no/such/teddy.mrsm") && err.contains("teddy"), "{err}");
+    let bytes = std::fs::read(&model).expect("model");
+    let cut = dir.join("cut.mrsm");
+    std::fs::write(&cut, &bytes[..bytes.len() / 2]).expect("write");
+    std::fs::write(&config_path, text.replace(model.to_str().expect("utf-8"), cut.to_str().expect("utf-8")))
+        .expect("write");
+    let out = Command::new(mrsmap_bin()).args(["track", "--config", path(&config_path)]).output().expect("runs");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("truncated") && err.contains("cut.mrsm"), "{err}");
+}

@@ -1,0 +1,155 @@
+//! Object tracking on rendered frames with known poses: accuracy, loss when the object
+//! leaves the view, re-initialisation when it comes back, invalid frames.
+
+mod common;
+
+use common::*;
+use mrsmap::frame::RgbdFrame;
+use mrsmap::geometry::Pose;
+use mrsmap::geometry::se3::left_increment;
+use mrsmap::map::{MapBuilder, MapCapacity, MapParams, PlacedFrame, SurfelMap};
+use mrsmap::model::RootStats;
+use mrsmap::slam::VolumeShape;
+use mrsmap::synthetic::{RenderTarget, room};
+use mrsmap::tracking::{ModelExtent, ObjectModel, PoseEstimate, SearchRegion, Tracker, TrackerParams, TrackingStatus};
+use nalgebra::{Matrix3, Vector3, Vector6};
+
+/// The "object": the two boxes and the sphere on the table of `room(5)`, fused from
+/// `views` at their known poses (object frame = the first camera's frame), inside a box
+/// above the table — a model as the mapping tool makes it, from several key views.
+fn object_model(views: &[(&RenderTarget, Pose)]) -> ObjectModel {
+    let cam = views[0].0.camera;
+    let capacity = MapCapacity { nodes: 200_000, surfels: 400_000 };
+    let mut map =
+        SurfelMap::new(MapParams { smooth_view_dirs: true, ..MapParams::default() }, capacity).expect("params");
+    let (center, half) = (Vector3::new(-0.1, 0.24, 0.98), Vector3::new(0.45, 0.25, 0.3));
+    let inside = move |p: &Vector3<f32>| (p.cast::<f64>() - center).iter().zip(half.iter()).all(|(d, h)| d.abs() <= *h);
+    let frames: Vec<RgbdFrame> =
+        views.iter().map(|(t, _)| RgbdFrame::new(0, cam, &t.rgb, &t.depth).expect("frame")).collect();
+    let placed: Vec<PlacedFrame> =
+        frames.iter().zip(views).map(|(frame, (_, pose))| PlacedFrame { frame, map_from_camera: *pose }).collect();
+    MapBuilder::new(cam.width as usize, cam.height as usize, capacity.surfels)
+        .fuse(&placed, &inside, &mut map)
+        .expect("the objects are in view");
+    let map = map.to_compact();
+    let root = RootStats::of(&map);
+    let [xx, xy, xz, yy, yz, zz] = root.covariance;
+    let (lo, hi) = map
+        .surfels()
+        .iter()
+        .filter(|s| s.usable())
+        .fold((Vector3::repeat(f64::INFINITY), Vector3::repeat(f64::NEG_INFINITY)), |(lo, hi), s| {
+            (lo.inf(&s.mean.cast()), hi.sup(&s.mean.cast()))
+        });
+    // A box volume is centred on the object frame's origin (the first camera): one that
+    // reaches the objects and stops above the table and before the walls.
+    let extent = ModelExtent::new(
+        Vector3::from(root.mean),
+        Matrix3::new(xx, xy, xz, xy, yy, yz, xz, yz, zz),
+        Some(&VolumeShape::Box { half_extents: [center.x.abs() + half.x, center.y + half.y, center.z + half.z] }),
+        (lo, hi),
+    )
+    .expect("extent");
+    ObjectModel {
+        name: "objects".into(),
+        map,
+        extent,
+        initial_camera_from_object: Pose::identity(),
+        search: SearchRegion { translation_m: 0.03, yaw_rad: 0.1 },
+    }
+}
+
+fn frame(t: &RenderTarget, k: u64) -> RgbdFrame<'_> {
+    RgbdFrame::new(k * 33_000_000, t.camera, &t.rgb, &t.depth).expect("rendered frame")
+}
+
+fn step(tracker: &mut Tracker, t: &RenderTarget, k: u64) -> PoseEstimate {
+    let mut out = [PoseEstimate { ..blank() }];
+    tracker.step(&frame(t, k), &mut out);
+    out[0]
+}
+
+fn blank() -> PoseEstimate {
+    PoseEstimate {
+        stamp_ns: 0,
+        object: 0,
+        status: TrackingStatus::Initialising,
+        camera_from_object: Pose::identity(),
+        covariance_ros: nalgebra::Matrix6::identity(),
+        quality: 0.0,
+        associations: 0,
+        iterations: 0,
+        bad_frames: 0,
+    }
+}
+
+#[test]
+fn tracks_loses_and_reinitialises() {
+    let mesh = room(5);
+    let cam = vga();
+    // The camera moves 7 mm and 0.2° per frame (object frame = first camera frame); the
+    // objects are small (12–40 cm): a few hundred surfel associations per frame.
+    let poses: Vec<Pose> =
+        (0..12).map(|k| left_increment(&(Vector6::new(0.006, -0.002, 0.004, 0.001, 0.003, 0.0) * k as f64))).collect();
+    let frames: Vec<RenderTarget> = poses.iter().map(|p| render_frame(&mesh, cam, p)).collect();
+    let views = [(&frames[0], poses[0]), (&frames[6], poses[6]), (&frames[11], poses[11])];
+    let mut tracker =
+        Tracker::new(TrackerParams::default(), cam.width as usize, cam.height as usize, vec![object_model(&views)])
+            .expect("tracker");
+    let mut last_good = Pose::identity();
+    for (k, (t, truth)) in frames.iter().zip(&poses).enumerate() {
+        let e = step(&mut tracker, t, k as u64);
+        last_good = e.camera_from_object;
+        let (mm, deg) = pose_error(&e.camera_from_object.inverse(), truth);
+        println!(
+            "frame {k}: {:?} quality {:.2} error {:.2} mm {:.3}° assoc {} it {}",
+            e.status,
+            e.quality,
+            mm * 1e3,
+            deg,
+            e.associations,
+            e.iterations
+        );
+        assert_eq!(e.status, TrackingStatus::Tracking, "frame {k}");
+        assert!(mm < 2e-3 && deg < 0.25, "frame {k}: {:.2} mm {:.3}°", mm * 1e3, deg);
+        assert!(e.quality > 0.8, "a good fit has quality near 1: {}", e.quality);
+        assert!(e.covariance_ros[(0, 0)] > 0.0 && e.covariance_ros[(0, 0)] < 1e-4);
+    }
+    // The camera turns away: no overlap. Held twice, lost at the third frame.
+    let away = render_frame(&mesh, cam, &left_increment(&Vector6::new(0.0, 0.0, 0.0, 0.0, 2.4, 0.0)));
+    let held = step(&mut tracker, &away, 20).camera_from_object;
+    let statuses: Vec<TrackingStatus> = (21..24).map(|k| step(&mut tracker, &away, k).status).collect();
+    assert_eq!(statuses, [TrackingStatus::Tracking, TrackingStatus::Lost, TrackingStatus::Initialising]);
+    assert_eq!(held, last_good, "the pose is held while registrations fail");
+    // Back near the initial view: a re-initialisation hypothesis catches it.
+    let back = render_frame(&mesh, cam, &poses[1]);
+    let mut status = TrackingStatus::Initialising;
+    for k in 30..45 {
+        status = step(&mut tracker, &back, k).status;
+        if status == TrackingStatus::Tracking {
+            break;
+        }
+    }
+    assert_eq!(status, TrackingStatus::Tracking, "re-initialised from the hypotheses");
+    let e = step(&mut tracker, &back, 50);
+    let (mm, _) = pose_error(&e.camera_from_object.inverse(), &poses[1]);
+    assert!(mm < 2e-3, "{:.2} mm after re-initialisation", mm * 1e3);
+}
+
+#[test]
+fn an_unusable_frame_leaves_the_state_alone() {
+    let mesh = room(5);
+    let cam = vga().halved();
+    let first = render_frame(&mesh, cam, &Pose::identity());
+    let mut tracker = Tracker::new(
+        TrackerParams::default(),
+        cam.width as usize,
+        cam.height as usize,
+        vec![object_model(&[(&first, Pose::identity())])],
+    )
+    .expect("tracker");
+    assert_eq!(step(&mut tracker, &first, 0).status, TrackingStatus::Tracking);
+    let e = tracker.invalid_frame(0, 1);
+    assert_eq!(e.status, TrackingStatus::InvalidFrame);
+    assert_eq!(step(&mut tracker, &first, 2).status, TrackingStatus::Tracking);
+}
