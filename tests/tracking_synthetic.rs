@@ -153,3 +153,26 @@ fn an_unusable_frame_leaves_the_state_alone() {
     assert_eq!(e.status, TrackingStatus::InvalidFrame);
     assert_eq!(step(&mut tracker, &first, 2).status, TrackingStatus::Tracking);
 }
+
+#[test]
+fn several_objects_are_tracked_in_one_step() {
+    let mesh = room(5);
+    let cam = vga().halved();
+    let first = render_frame(&mesh, cam, &Pose::identity());
+    let mut second = object_model(&[(&first, Pose::identity())]);
+    second.name = "objects-again".into();
+    let models = vec![object_model(&[(&first, Pose::identity())]), second];
+    let mut tracker =
+        Tracker::new(TrackerParams::default(), cam.width as usize, cam.height as usize, models).expect("tracker");
+    assert_eq!(tracker.names(), ["objects", "objects-again"]);
+    let moved = left_increment(&Vector6::new(0.006, -0.002, 0.004, 0.001, 0.003, 0.0));
+    let next = render_frame(&mesh, cam, &moved);
+    let mut out = [blank(), blank()];
+    tracker.step(&frame(&first, 0), &mut out);
+    tracker.step(&frame(&next, 1), &mut out);
+    for (k, e) in out.iter().enumerate() {
+        assert_eq!((e.object, e.status), (k, TrackingStatus::Tracking));
+        let (mm, _) = pose_error(&e.camera_from_object.inverse(), &moved);
+        assert!(mm < 2e-3, "object {k}: {:.2} mm", mm * 1e3);
+    }
+}
