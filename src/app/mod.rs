@@ -3,6 +3,7 @@
 
 pub mod bench;
 pub mod camera_driver;
+pub mod convert;
 pub mod dataset;
 pub mod demo;
 pub mod mapper;
@@ -11,6 +12,7 @@ pub mod odometry;
 pub mod poses_client;
 pub mod quality_eval;
 pub mod render;
+pub mod replay;
 pub mod report;
 pub mod track_dataset;
 pub mod tracker_process;

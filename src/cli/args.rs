@@ -307,3 +307,100 @@ pub struct QualityArgs {
     #[arg(long, default_value_t = 3)]
     pub seed: u64,
 }
+
+/// Topics of an RGB-D recording.
+#[derive(Args)]
+pub struct TopicArgs {
+    /// Colour images (sensor_msgs/msg/Image or foxglove.RawImage: rgb8, bgr8, rgba8, bgra8).
+    #[arg(long, default_value = mrsmap::io::recording::DEFAULT_COLOR_TOPIC)]
+    pub color_topic: String,
+    /// Depth images registered to colour (16UC1/mono16 in mm, 32FC1 in m).
+    #[arg(long, default_value = mrsmap::io::recording::DEFAULT_DEPTH_TOPIC)]
+    pub depth_topic: String,
+    /// Calibration (sensor_msgs/msg/CameraInfo or foxglove.CameraCalibration).
+    #[arg(long, default_value = mrsmap::io::recording::DEFAULT_CAMERA_INFO_TOPIC)]
+    pub camera_info_topic: String,
+}
+
+impl TopicArgs {
+    pub fn topics(&self) -> mrsmap::io::recording::RecordingTopics {
+        mrsmap::io::recording::RecordingTopics {
+            color: self.color_topic.clone(),
+            depth: self.depth_topic.clone(),
+            camera_info: self.camera_info_topic.clone(),
+        }
+    }
+}
+
+#[derive(Args)]
+pub struct ReplayArgs {
+    /// The recording (MCAP; ROS 2 CDR or Foxglove protobuf images).
+    #[arg(long)]
+    pub input: PathBuf,
+    /// Tracker configuration, e.g. robot_config/tracker.toml (objects, models, start poses).
+    #[arg(long)]
+    pub config: PathBuf,
+    /// Poses to write (MCAP): geometry_msgs/msg/PoseWithCovarianceStamped on
+    /// /mrsmap/<object>/pose and foxglove.PosesInFrame on /mrsmap/poses.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Replace --out if it exists.
+    #[arg(long)]
+    pub force: bool,
+    /// object_from_camera of each object (TUM format, depth stamps; suffixed by the
+    /// object's name when there are several).
+    #[arg(long)]
+    pub trajectory: Option<PathBuf>,
+    #[command(flatten)]
+    pub topics: TopicArgs,
+    /// Camera file to use instead of the recording's calibration messages.
+    #[arg(long)]
+    pub camera: Option<PathBuf>,
+    /// Track only every n-th frame (the default 1 tracks every frame; none is dropped).
+    #[arg(long, default_value_t = 1)]
+    pub every: usize,
+    /// Stop after this many tracked frames.
+    #[arg(long)]
+    pub max_frames: Option<usize>,
+}
+
+#[derive(Subcommand)]
+pub enum ConvertCommand {
+    /// A TUM RGB-D sequence as a ROS 2 MCAP recording: sensor_msgs/msg/Image (rgb8 and
+    /// 16UC1 depth in mm, or 32FC1 in m) and sensor_msgs/msg/CameraInfo, stamped with the
+    /// images' timestamps.
+    ///
+    /// Example:
+    ///   mrsmap convert tum-to-mcap tests/data/fr3_teddy_8 --out teddy.mcap
+    TumToMcap(TumToMcapArgs),
+}
+
+#[derive(Args)]
+pub struct TumToMcapArgs {
+    /// Dataset folder in TUM layout.
+    pub dataset: PathBuf,
+    /// The recording to write.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Replace --out if it exists.
+    #[arg(long)]
+    pub force: bool,
+    /// Camera file [default: the TUM camera the folder's name gives (fr1/fr2/fr3)].
+    #[arg(long)]
+    pub camera: Option<PathBuf>,
+    /// Depth encoding: 16UC1 (mm, what ROS 2 drivers publish) or 32FC1 (m; keeps TUM's
+    /// 0.2 mm units exactly).
+    #[arg(long, default_value = "16UC1", value_parser = ["16UC1", "32FC1"])]
+    pub depth_encoding: String,
+    /// Chunk compression.
+    #[arg(long, default_value = "zstd", value_parser = ["zstd", "lz4"])]
+    pub compression: String,
+    #[command(flatten)]
+    pub topics: TopicArgs,
+    /// Skip this many frames.
+    #[arg(long, default_value_t = 0)]
+    pub first_frame: usize,
+    /// Convert at most this many frames.
+    #[arg(long)]
+    pub max_frames: Option<usize>,
+}

@@ -247,3 +247,51 @@ pub fn bench(a: BenchArgs) -> Result<()> {
 pub fn demo(a: DemoArgs) -> Result<()> {
     app::demo::run(&app::demo::DemoJob { config: a.config, dataset: a.dataset, camera: a.camera, rate_hz: a.rate })
 }
+
+/// `mrsmap replay`.
+pub fn replay(a: ReplayArgs) -> Result<()> {
+    let config = mrsmap::io::tracker_config::read_tracker_config(&a.config)?;
+    let camera = a.camera.as_deref().map(mrsmap::io::camera_file::read_camera).transpose()?;
+    let job = app::replay::ReplayJob {
+        input: a.input,
+        out: a.out,
+        force: a.force,
+        trajectory: a.trajectory,
+        topics: a.topics.topics(),
+        camera,
+        every: a.every,
+        max_frames: a.max_frames,
+    };
+    let summary = app::replay::run(&config, &job)?;
+    app::replay::print_summary(&summary);
+    if let Some(out) = &job.out {
+        println!("poses written to {}", out.display());
+    }
+    Ok(())
+}
+
+/// `mrsmap convert`.
+pub fn convert(c: ConvertCommand) -> Result<()> {
+    match c {
+        ConvertCommand::TumToMcap(a) => {
+            let job = app::convert::ConvertJob {
+                dataset: a.dataset,
+                camera: a.camera,
+                out: a.out,
+                force: a.force,
+                depth_encoding: if a.depth_encoding == "32FC1" {
+                    mrsmap::io::mcap_write::DepthEncoding::M32
+                } else {
+                    mrsmap::io::mcap_write::DepthEncoding::Mm16
+                },
+                compression: if a.compression == "lz4" { mcap::Compression::Lz4 } else { mcap::Compression::Zstd },
+                topics: a.topics.topics(),
+                first_frame: a.first_frame,
+                max_frames: a.max_frames,
+            };
+            let (written, skipped) = app::convert::run(&job)?;
+            println!("{written} frames written to {} ({skipped} unreadable frames skipped)", job.out.display());
+            Ok(())
+        }
+    }
+}

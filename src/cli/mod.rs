@@ -71,6 +71,24 @@ pub enum Command {
     /// Control-stack client: subscribes to the tracker's poses and prints them (and
     /// writes TUM trajectories with --out). The example to copy into a robot.
     Poses(PosesArgs),
+    /// Offline: the tracker's per-frame step on every frame of an MCAP recording.
+    ///
+    /// Reads ROS 2 (sensor_msgs/msg/Image + CameraInfo, CDR) or Foxglove (RawImage +
+    /// CameraCalibration, protobuf) recordings, through the file's index when it has one
+    /// (memory stays bounded by the chunk size), streaming otherwise; a truncated file is
+    /// replayed up to the damage. Colour and depth are paired by header stamp (≤ 20 ms).
+    /// Writes poses as MCAP (ROS 2 PoseWithCovarianceStamped per object and
+    /// foxglove.PosesInFrame, in the camera's optical frame, so Foxglove draws them over
+    /// the images) and TUM trajectories. The same input gives byte-identical output at any
+    /// thread count.
+    ///
+    /// Example:
+    ///   mrsmap convert tum-to-mcap tests/data/fr3_teddy_8 --out teddy.mcap
+    ///   mrsmap replay --input teddy.mcap --config robot_config/tracker.toml --out poses.mcap --trajectory traj.txt
+    Replay(ReplayArgs),
+    /// Convert recordings (TUM RGB-D → MCAP).
+    #[command(subcommand)]
+    Convert(ConvertCommand),
     /// Trajectory errors as the TUM benchmark defines them (agrees with `evo`).
     #[command(subcommand)]
     Eval(EvalCommand),
@@ -89,6 +107,8 @@ pub fn run(command: Command) -> Result<()> {
         Command::Camera(a) => commands::camera(a),
         Command::Track(a) => commands::track(a),
         Command::Poses(a) => commands::poses(a),
+        Command::Replay(a) => commands::replay(a),
+        Command::Convert(c) => commands::convert(c),
         Command::Eval(c) => commands::eval(c),
         Command::Bench(a) => commands::bench(a),
     }

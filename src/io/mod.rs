@@ -4,8 +4,13 @@
 pub mod camera_file;
 pub mod frames;
 pub mod image;
+pub mod image_msg;
 pub mod ipc;
+pub mod mcap_source;
+pub mod mcap_write;
 pub mod object_file;
+pub mod recording;
+pub mod ros2;
 pub mod tracker_config;
 pub mod tum;
 pub mod wire;

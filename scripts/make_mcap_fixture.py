@@ -1,0 +1,114 @@
+#!/usr/bin/env python3
+"""Writes the MCAP fixtures in tests/data with independent writers (not mrsmap's):
+
+- tests/data/python_ros2.mcap: the Python `mcap` + `mcap-ros2-support` writer, ROS 2
+  sensor_msgs/msg/Image and CameraInfo. Topics /camera/color/image_raw (rgb8),
+  /camera/depth/image_raw (16UC1, mm), /camera/color/camera_info, and a second set
+  /alt/color (bgr8), /alt/depth (32FC1, m), /alt/camera_info.
+- tests/data/python_foxglove.mcap: `mcap-protobuf-support` with the Foxglove schemas
+  (foxglove.RawImage rgb8 and 16UC1, foxglove.CameraCalibration) on the same default topics.
+
+Images are 64x48 with pixel values given by a formula the Rust test repeats
+(tests/mcap_interop.rs): colour (u*7 + v*3 + i, u + 5*v, 40*i + u) mod 256, depth
+500 + 10*u + v + i mm, frame i stamped 1.0 + i/30 s (colour 5 ms before depth).
+
+    python3 -m pip install 'mcap==1.6.0' 'mcap-ros2-support==0.6.0' \
+        'mcap-protobuf-support==0.6.0' 'foxglove-schemas-protobuf==0.4.0'
+    python3 scripts/make_mcap_fixture.py
+"""
+import struct
+import sys
+from pathlib import Path
+
+W, H, N = 64, 48, 3
+FX, FY, CX, CY = 52.5, 53.0, 31.5, 23.5
+
+TIME = "MSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n"
+HEADER = "MSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n"
+SEP = "=" * 80 + "\n"
+IMAGE = ("std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\nuint8 is_bigendian\n"
+         "uint32 step\nuint8[] data\n" + SEP + HEADER + SEP + TIME)
+CAMERA_INFO = ("std_msgs/Header header\nuint32 height\nuint32 width\nstring distortion_model\nfloat64[] d\n"
+               "float64[9] k\nfloat64[9] r\nfloat64[12] p\nuint32 binning_x\nuint32 binning_y\n"
+               "sensor_msgs/RegionOfInterest roi\n" + SEP + HEADER + SEP + TIME + SEP
+               + "MSG: sensor_msgs/RegionOfInterest\nuint32 x_offset\nuint32 y_offset\nuint32 height\n"
+               "uint32 width\nbool do_rectify\n")
+
+
+def colour(i):
+    return [((u * 7 + v * 3 + i) % 256, (u + 5 * v) % 256, (40 * i + u) % 256) for v in range(H) for u in range(W)]
+
+
+def depth_mm(i):
+    return [500 + 10 * u + v + i for v in range(H) for u in range(W)]
+
+
+def stamps(i):
+    depth_ns = 1_000_000_000 + i * 1_000_000_000 // 30
+    return depth_ns - 5_000_000, depth_ns
+
+
+def stamp(ns):
+    return {"sec": ns // 1_000_000_000, "nanosec": ns % 1_000_000_000}
+
+
+def ros2(path):
+    from mcap_ros2.writer import Writer
+    with open(path, "wb") as f:
+        w = Writer(f)
+        image = w.register_msgdef("sensor_msgs/msg/Image", IMAGE)
+        info = w.register_msgdef("sensor_msgs/msg/CameraInfo", CAMERA_INFO)
+        for i in range(N):
+            c_ns, d_ns = stamps(i)
+            hdr = lambda ns: {"stamp": stamp(ns), "frame_id": "camera_color_optical_frame"}
+            cam = {"header": hdr(d_ns), "height": H, "width": W, "distortion_model": "plumb_bob",
+                   "d": [0.0] * 5, "k": [FX, 0, CX, 0, FY, CY, 0, 0, 1], "r": [1, 0, 0, 0, 1, 0, 0, 0, 1],
+                   "p": [FX, 0, CX, 0, 0, FY, CY, 0, 0, 0, 1, 0], "binning_x": 0, "binning_y": 0,
+                   "roi": {"x_offset": 0, "y_offset": 0, "height": 0, "width": 0, "do_rectify": False}}
+            rgb = bytes(x for p in colour(i) for x in p)
+            bgr = bytes(x for p in colour(i) for x in reversed(p))
+            mm = struct.pack("<%dH" % (W * H), *depth_mm(i))
+            metres = struct.pack("<%df" % (W * H), *(d / 1000.0 for d in depth_mm(i)))
+            for prefix, info_topic, c_enc, c_data, d_enc, d_data, d_bpp in [
+                ("/camera/color/image_raw", "/camera/color/camera_info", "rgb8", rgb, "16UC1", mm, 2),
+                ("/alt/color", "/alt/camera_info", "bgr8", bgr, "32FC1", metres, 4),
+            ]:
+                depth_topic = "/camera/depth/image_raw" if prefix.startswith("/camera") else "/alt/depth"
+                w.write_message(info_topic, info, cam, log_time=d_ns, publish_time=d_ns)
+                w.write_message(prefix, image, {"header": hdr(c_ns), "height": H, "width": W, "encoding": c_enc,
+                                                "is_bigendian": 0, "step": 3 * W, "data": c_data},
+                                log_time=c_ns, publish_time=c_ns)
+                w.write_message(depth_topic, image, {"header": hdr(d_ns), "height": H, "width": W,
+                                                     "encoding": d_enc, "is_bigendian": 0, "step": d_bpp * W,
+                                                     "data": d_data},
+                                log_time=d_ns, publish_time=d_ns)
+        w.finish()
+
+
+def foxglove(path):
+    from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
+    from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
+    from mcap_protobuf.writer import Writer
+    with open(path, "wb") as f, Writer(f) as w:
+        for i in range(N):
+            c_ns, d_ns = stamps(i)
+            cal = CameraCalibration(width=W, height=H, distortion_model="plumb_bob", D=[0.0] * 5,
+                                    K=[FX, 0, CX, 0, FY, CY, 0, 0, 1], R=[1, 0, 0, 0, 1, 0, 0, 0, 1],
+                                    P=[FX, 0, CX, 0, 0, FY, CY, 0, 0, 0, 1, 0], frame_id="camera")
+            cal.timestamp.FromNanoseconds(d_ns)
+            w.write_message("/camera/color/camera_info", cal, log_time=d_ns, publish_time=d_ns)
+            img = RawImage(width=W, height=H, encoding="rgb8", step=3 * W, frame_id="camera",
+                           data=bytes(x for p in colour(i) for x in p))
+            img.timestamp.FromNanoseconds(c_ns)
+            w.write_message("/camera/color/image_raw", img, log_time=c_ns, publish_time=c_ns)
+            dep = RawImage(width=W, height=H, encoding="16UC1", step=2 * W, frame_id="camera",
+                           data=struct.pack("<%dH" % (W * H), *depth_mm(i)))
+            dep.timestamp.FromNanoseconds(d_ns)
+            w.write_message("/camera/depth/image_raw", dep, log_time=d_ns, publish_time=d_ns)
+
+
+if __name__ == "__main__":
+    out = Path(sys.argv[1] if len(sys.argv) > 1 else Path(__file__).resolve().parent.parent / "tests" / "data")
+    ros2(out / "python_ros2.mcap")
+    foxglove(out / "python_foxglove.mcap")
+    print("wrote", out / "python_ros2.mcap", "and", out / "python_foxglove.mcap")

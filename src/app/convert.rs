@@ -1,0 +1,98 @@
+//! `mrsmap convert tum-to-mcap`: a TUM RGB-D sequence as a ROS 2 MCAP recording (colour
+//! `rgb8`, depth `16UC1` in mm or `32FC1` in m, `CameraInfo`), as a robot would record it.
+
+use super::report::progress_bar;
+use crate::geometry::CameraModel;
+use crate::io::camera_file::{parse_camera, read_camera};
+use crate::io::frames::FrameLoader;
+use crate::io::mcap_write::{DepthEncoding, FrameChannels, McapFile};
+use crate::io::recording::RecordingTopics;
+use crate::io::tum::{TumDataset, format_stamp};
+use anyhow::{Context, Result, bail};
+use std::path::{Path, PathBuf};
+
+/// What to convert.
+#[derive(Debug, Clone)]
+pub struct ConvertJob {
+    /// TUM dataset folder.
+    pub dataset: PathBuf,
+    /// Camera file; guessed from the folder name (freiburg1/2/3, fr1/2/3) if absent.
+    pub camera: Option<PathBuf>,
+    /// Output file.
+    pub out: PathBuf,
+    /// Replace `out` if it exists.
+    pub force: bool,
+    /// Depth encoding.
+    pub depth_encoding: DepthEncoding,
+    /// Chunk compression.
+    pub compression: mcap::Compression,
+    /// Topics to write.
+    pub topics: RecordingTopics,
+    /// Skip this many frames.
+    pub first_frame: usize,
+    /// At most this many frames.
+    pub max_frames: Option<usize>,
+}
+
+/// The TUM calibrations, built in for datasets named after their camera.
+const TUM_CAMERAS: [(&str, &str); 3] = [
+    ("1", include_str!("../../robot_config/cameras/tum_fr1.toml")),
+    ("2", include_str!("../../robot_config/cameras/tum_fr2.toml")),
+    ("3", include_str!("../../robot_config/cameras/tum_fr3.toml")),
+];
+
+/// The camera of a TUM dataset from its folder name, if it names one.
+pub fn tum_camera_for(dataset: &Path) -> Option<CameraModel> {
+    let name = dataset.canonicalize().ok()?.file_name()?.to_string_lossy().to_lowercase();
+    TUM_CAMERAS.iter().find_map(|(n, text)| {
+        let named = name.contains(&format!("freiburg{n}")) || name.contains(&format!("fr{n}_"));
+        named.then(|| parse_camera(text, Path::new("built-in TUM camera")).ok()).flatten()
+    })
+}
+
+/// Writes the recording; returns the number of frames written and skipped (unreadable).
+pub fn run(job: &ConvertJob) -> Result<(usize, usize)> {
+    if job.out.exists() && !job.force {
+        bail!("{} exists; pass --force to replace it", job.out.display());
+    }
+    let camera = match &job.camera {
+        Some(path) => read_camera(path)?,
+        None => tum_camera_for(&job.dataset).with_context(|| {
+            format!(
+                "cannot tell the camera of {} from its name (freiburg1/2/3 or fr1_/fr2_/fr3_); pass --camera",
+                job.dataset.display()
+            )
+        })?,
+    };
+    let dataset =
+        TumDataset::open(&job.dataset).with_context(|| format!("opening dataset {}", job.dataset.display()))?;
+    let frames: Vec<_> =
+        dataset.frames.iter().skip(job.first_frame).take(job.max_frames.unwrap_or(usize::MAX)).collect();
+    if frames.is_empty() {
+        bail!("no frames to convert in {}", job.dataset.display());
+    }
+    // Written next to the target and renamed at the end: a failed run leaves no half file.
+    let partial = job.out.with_extension("mcap.partial");
+    let mut file =
+        McapFile::create(&partial, job.compression).with_context(|| format!("creating {}", partial.display()))?;
+    let t = &job.topics;
+    let channels = FrameChannels::add(&mut file, [&t.color, &t.depth, &t.camera_info], job.depth_encoding)?;
+    let mut loader = FrameLoader::new(camera, false);
+    let mut scratch = Vec::new();
+    let bar = progress_bar(frames.len() as u64, "converting");
+    let mut skipped = 0;
+    for entry in &frames {
+        bar.inc(1);
+        match loader.load(entry) {
+            Ok(frame) => channels.write_frame(&mut file, &frame, entry.rgb_stamp_ns, &mut scratch)?,
+            Err(e) => {
+                bar.suspend(|| eprintln!("warning: frame {}: {e}; not written", format_stamp(entry.depth_stamp_ns)));
+                skipped += 1;
+            }
+        }
+    }
+    bar.finish_and_clear();
+    file.finish()?;
+    std::fs::rename(&partial, &job.out).with_context(|| format!("renaming to {}", job.out.display()))?;
+    Ok((frames.len() - skipped, skipped))
+}

@@ -1,0 +1,220 @@
+//! `mrsmap replay`: the tracker's per-frame step (the one the live process runs) on every
+//! frame of an MCAP recording; poses out as MCAP (ROS 2 and Foxglove) and TUM trajectories.
+
+use super::dataset::thread_pool;
+use super::poses_client::with_suffix;
+use super::report::{percentile, progress_bar};
+use super::tracking::{StepOutput, load_tracker, track_frame};
+use crate::geometry::{CameraModel, Pose};
+use crate::io::mcap_source::ReadMode;
+use crate::io::mcap_write::{McapFile, ObjectPoseRecord, PoseChannels};
+use crate::io::recording::{Damage, RecordingReader, RecordingStats, RecordingTopics};
+use crate::io::tracker_config::TrackerConfig;
+use crate::io::tum::write_trajectory;
+use crate::tracking::{Tracker, TrackingStatus};
+use anyhow::{Context, Result, bail};
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// What to replay.
+#[derive(Debug, Clone)]
+pub struct ReplayJob {
+    /// The recording.
+    pub input: PathBuf,
+    /// Poses to write (MCAP).
+    pub out: Option<PathBuf>,
+    /// Replace `out` if it exists.
+    pub force: bool,
+    /// `object_from_camera` per object (TUM format; suffixed by name for several).
+    pub trajectory: Option<PathBuf>,
+    /// Topics of the images and calibration.
+    pub topics: RecordingTopics,
+    /// Camera replacing the recording's calibration.
+    pub camera: Option<CameraModel>,
+    /// Track every n-th frame only (1: all).
+    pub every: usize,
+    /// Stop after this many frames.
+    pub max_frames: Option<usize>,
+}
+
+/// What happened.
+#[derive(Debug, Clone)]
+pub struct ReplaySummary {
+    /// How the file was read.
+    pub mode: ReadMode,
+    /// Messages and frames read.
+    pub stats: RecordingStats,
+    /// Frames tracked.
+    pub tracked_frames: usize,
+    /// Per object: name, frames per status (tracking, lost, initialising, invalid), and
+    /// tracking time per frame (ms).
+    pub objects: Vec<(String, [usize; 4], Vec<f64>)>,
+    /// Wall-clock seconds of the whole replay (reading, decoding, tracking, writing).
+    pub seconds: f64,
+    /// Where the recording was damaged.
+    pub damage: Option<Damage>,
+}
+
+/// Replays the recording through the tracker.
+pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
+    if job.every == 0 {
+        bail!("--every must be at least 1");
+    }
+    if let Some(out) = &job.out {
+        if out.exists() && !job.force {
+            bail!("{} exists; pass --force to replace it", out.display());
+        }
+        if out.canonicalize().ok() == job.input.canonicalize().ok() {
+            bail!("--out {} is the input recording", out.display());
+        }
+    }
+    let started = Instant::now();
+    let mut reader = RecordingReader::open(&job.input, job.topics.clone(), job.camera)?;
+    let pool = thread_pool(config.threads)?;
+    let names: Vec<String> = config.objects.iter().map(|o| o.name.clone()).collect();
+    // Written next to the target and renamed when finished, also after an error, so
+    // the poses computed before it are kept.
+    let partial = job.out.as_ref().map(|o| o.with_extension("mcap.partial"));
+    let mut output = match &partial {
+        Some(p) => {
+            let mut file =
+                McapFile::create(p, mcap::Compression::Zstd).with_context(|| format!("creating {}", p.display()))?;
+            let channels = PoseChannels::add(&mut file, &names)?;
+            Some((file, channels))
+        }
+        None => None,
+    };
+    let mut state = Replay {
+        tracker: None,
+        out: StepOutput::new(names.len()),
+        statuses: vec![[0; 4]; names.len()],
+        track_ms: vec![Vec::new(); names.len()],
+        tracked: vec![Vec::new(); names.len()],
+        frames: 0,
+    };
+    let bar = progress_bar(reader.depth_count().unwrap_or(0), "replaying");
+    let result = state.replay(config, job, &mut reader, &pool, &names, output.as_mut(), &bar);
+    bar.finish_and_clear();
+    if let (Some((file, _)), Some(partial), Some(out)) = (output, &partial, &job.out) {
+        file.finish().with_context(|| format!("finishing {}", partial.display()))?;
+        std::fs::rename(partial, out).with_context(|| format!("renaming to {}", out.display()))?;
+    }
+    if let Some(path) = &job.trajectory {
+        for (k, name) in names.iter().enumerate() {
+            let path = if names.len() == 1 { path.clone() } else { with_suffix(path, name) };
+            let header = format!(
+                "mrsmap replay: object_from_camera of '{name}' (frames where it was tracked), stamped with depth timestamps\nrecording {}",
+                job.input.display()
+            );
+            write_trajectory(&path, &header, &state.tracked[k])?;
+        }
+    }
+    result?;
+    Ok(ReplaySummary {
+        mode: reader.mode(),
+        stats: reader.stats(),
+        tracked_frames: state.frames,
+        objects: names.into_iter().zip(state.statuses).zip(state.track_ms).map(|((n, s), t)| (n, s, t)).collect(),
+        seconds: started.elapsed().as_secs_f64(),
+        damage: reader.damage().cloned(),
+    })
+}
+
+struct Replay {
+    tracker: Option<Tracker>,
+    out: StepOutput,
+    statuses: Vec<[usize; 4]>,
+    track_ms: Vec<Vec<f64>>,
+    tracked: Vec<Vec<(u64, Pose)>>,
+    frames: usize,
+}
+
+impl Replay {
+    #[allow(clippy::too_many_arguments)]
+    fn replay(
+        &mut self,
+        config: &TrackerConfig,
+        job: &ReplayJob,
+        reader: &mut RecordingReader,
+        pool: &rayon::ThreadPool,
+        names: &[String],
+        mut output: Option<&mut (McapFile, PoseChannels)>,
+        bar: &indicatif::ProgressBar,
+    ) -> Result<()> {
+        let mut index = 0usize;
+        let mut records = Vec::with_capacity(names.len());
+        while let Some(frame) = reader.next_frame()? {
+            bar.inc(1);
+            index += 1;
+            if !(index - 1).is_multiple_of(job.every) {
+                continue;
+            }
+            if job.max_frames.is_some_and(|m| self.frames >= m) {
+                break;
+            }
+            let tracker = match &mut self.tracker {
+                Some(t) => t,
+                // Sized by the first frame: the recording's resolution.
+                None => self.tracker.insert(load_tracker(config, frame.width(), frame.height())?),
+            };
+            track_frame(tracker, pool, &frame, &mut self.out);
+            self.frames += 1;
+            records.clear();
+            for (k, name) in names.iter().enumerate() {
+                let e = &self.out.estimates[k];
+                self.statuses[k][e.status as usize] += 1;
+                if e.status != TrackingStatus::InvalidFrame {
+                    self.track_ms[k].push(f64::from(self.out.build_ms[k] + self.out.register_ms[k]));
+                }
+                if e.status == TrackingStatus::Tracking {
+                    self.tracked[k].push((frame.stamp_ns, e.camera_from_object.inverse()));
+                    records.push(ObjectPoseRecord {
+                        object: k,
+                        name,
+                        camera_from_object: e.camera_from_object,
+                        covariance_ros: e.covariance_ros,
+                    });
+                }
+            }
+            if let Some((file, channels)) = output.as_deref_mut() {
+                channels.write(file, frame.stamp_ns, &records)?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Prints the summary.
+pub fn print_summary(s: &ReplaySummary) {
+    let mode = match s.mode {
+        ReadMode::Indexed => "indexed",
+        ReadMode::Streamed => "streamed (no index)",
+    };
+    println!(
+        "read {} colour, {} depth, {} calibration messages ({mode}); {} frames paired, {} images unpaired; {} tracked",
+        s.stats.color, s.stats.depth, s.stats.camera_info, s.stats.frames, s.stats.unpaired, s.tracked_frames
+    );
+    for (name, [t, l, i, v], ms) in &s.objects {
+        println!("{name}: {t} frames tracking, {l} lost, {i} initialising, {v} invalid");
+        if !ms.is_empty() {
+            println!(
+                "  tracking time per frame: median {:.2} ms, p99 {:.2} ms",
+                percentile(ms, 0.5),
+                percentile(ms, 0.99)
+            );
+        }
+    }
+    if s.tracked_frames > 0 {
+        println!(
+            "replay: {:.2} s, {:.1} frames/s end to end (reading, decoding, tracking, writing)",
+            s.seconds,
+            s.tracked_frames as f64 / s.seconds
+        );
+    }
+    if let Some(d) = &s.damage {
+        println!(
+            "warning: the recording is damaged after {} messages ({}); replayed up to the damage",
+            d.messages_before, d.reason
+        );
+    }
+}

@@ -1,0 +1,320 @@
+//! MCAP recordings: reading files of an independent writer (Python `mcap-ros2-support`,
+//! `mcap-protobuf-support` with the Foxglove schemas: tests/data/python_*.mcap, made by
+//! scripts/make_mcap_fixture.py), conversion, replay (same poses as the dataset run,
+//! byte-identical output at 1 and 2 threads) and bad recordings.
+
+mod common;
+
+use common::*;
+use mrsmap::app::convert::{ConvertJob, run as convert};
+use mrsmap::app::replay::{ReplayJob, run as replay};
+use mrsmap::io::mcap_source::ReadMode;
+use mrsmap::io::mcap_write::{DepthEncoding, FrameChannels, McapFile};
+use mrsmap::io::recording::{RecordingError, RecordingReader, RecordingTopics};
+use mrsmap::io::ros2::{CameraInfo, Header, Image, RegionOfInterest, Time};
+use mrsmap::io::tracker_config::read_tracker_config;
+use std::path::{Path, PathBuf};
+
+const W: usize = 64;
+const H: usize = 48;
+
+fn expected_rgb(i: usize) -> Vec<u8> {
+    let mut v = Vec::new();
+    for y in 0..H {
+        for u in 0..W {
+            v.extend([((u * 7 + y * 3 + i) % 256) as u8, ((u + 5 * y) % 256) as u8, ((40 * i + u) % 256) as u8]);
+        }
+    }
+    v
+}
+
+fn expected_depth_mm(i: usize) -> Vec<u16> {
+    (0..H).flat_map(|y| (0..W).map(move |u| (500 + 10 * u + y + i) as u16)).collect()
+}
+
+fn expected_depth_stamp_ns(i: usize) -> u64 {
+    1_000_000_000 + i as u64 * 1_000_000_000 / 30
+}
+
+fn alt_topics() -> RecordingTopics {
+    RecordingTopics { color: "/alt/color".into(), depth: "/alt/depth".into(), camera_info: "/alt/camera_info".into() }
+}
+
+/// Reads every frame of a fixture and checks pixels, stamps and calibration.
+fn check_fixture(path: &Path, topics: RecordingTopics, depth_units_per_mm: u16) {
+    let mut reader = RecordingReader::open(path, topics, None).expect("opens");
+    assert_eq!(reader.mode(), ReadMode::Indexed);
+    let mut i = 0;
+    while let Some(frame) = reader.next_frame().expect("decodes") {
+        assert_eq!(frame.stamp_ns, expected_depth_stamp_ns(i), "frame {i} has the depth stamp");
+        assert_eq!((frame.camera.width, frame.camera.height), (W as u32, H as u32));
+        let k = frame.camera.intrinsics;
+        assert_eq!((k.fx, k.fy, k.cx, k.cy), (52.5, 53.0, 31.5, 23.5));
+        assert_eq!(frame.rgb, &expected_rgb(i)[..], "colour of frame {i}");
+        let depth: Vec<u16> = expected_depth_mm(i).iter().map(|d| d * depth_units_per_mm).collect();
+        assert_eq!(frame.depth, &depth[..], "depth of frame {i}");
+        let metres = f64::from(frame.depth[0]) * frame.camera.depth_scale_m;
+        assert!((metres - f64::from(500 + i as u16) * 1e-3).abs() < 1e-9, "depth scale: {metres}");
+        i += 1;
+    }
+    assert_eq!(i, 3, "all frames of {}", path.display());
+    assert!(reader.damage().is_none());
+    assert_eq!(reader.stats().unpaired, 0);
+}
+
+#[test]
+fn reads_ros2_recordings_of_the_python_writer() {
+    check_fixture(&root().join("tests/data/python_ros2.mcap"), RecordingTopics::default(), 1);
+    // bgr8 colour and 32FC1 depth in metres (stored at 0.2 mm, so 5 units per mm).
+    check_fixture(&root().join("tests/data/python_ros2.mcap"), alt_topics(), 5);
+}
+
+#[test]
+fn reads_foxglove_raw_images_of_the_python_writer() {
+    check_fixture(&root().join("tests/data/python_foxglove.mcap"), RecordingTopics::default(), 1);
+}
+
+fn convert_clip(dir: &Path, depth_encoding: DepthEncoding) -> PathBuf {
+    let out = dir.join("teddy.mcap");
+    let job = ConvertJob {
+        dataset: teddy_clip(),
+        camera: None,
+        out: out.clone(),
+        force: false,
+        depth_encoding,
+        compression: mcap::Compression::Zstd,
+        topics: RecordingTopics::default(),
+        first_frame: 0,
+        max_frames: None,
+    };
+    assert_eq!(convert(&job).expect("converts"), (8, 0));
+    out
+}
+
+fn replay_job(input: &Path, out: Option<PathBuf>, trajectory: Option<PathBuf>) -> ReplayJob {
+    ReplayJob {
+        input: input.to_path_buf(),
+        out,
+        force: false,
+        trajectory,
+        topics: RecordingTopics::default(),
+        camera: None,
+        every: 1,
+        max_frames: None,
+    }
+}
+
+fn config_with_threads(dir: &Path, threads: usize) -> mrsmap::io::tracker_config::TrackerConfig {
+    let path = dir.join(format!("tracker{threads}.toml"));
+    let text = tracker_config_text("replay", "").replace("threads = 2", &format!("threads = {threads}"));
+    std::fs::write(&path, text).expect("write config");
+    read_tracker_config(&path).expect("config")
+}
+
+#[test]
+fn replay_matches_the_dataset_run_and_is_byte_identical_at_any_thread_count() {
+    let dir = temp_dir("mcap-replay");
+    let recording = convert_clip(&dir, DepthEncoding::M32);
+    let mut outputs = Vec::new();
+    for threads in [1, 2] {
+        let config = config_with_threads(&dir, threads);
+        let out = dir.join(format!("poses{threads}.mcap"));
+        let traj = dir.join(format!("traj{threads}.txt"));
+        let s = replay(&config, &replay_job(&recording, Some(out.clone()), Some(traj.clone()))).expect("replays");
+        assert_eq!(s.tracked_frames, 8);
+        assert_eq!(s.objects[0].1[0], 8, "tracking on every frame");
+        outputs.push((std::fs::read(&out).expect("poses"), std::fs::read_to_string(&traj).expect("trajectory")));
+    }
+    assert!(outputs[0].0 == outputs[1].0, "the pose files differ between 1 and 2 threads");
+    // 32FC1 keeps TUM's depth units exactly: the same poses as tracking the dataset.
+    let config = config_with_threads(&dir, 2);
+    let job = mrsmap::app::track_dataset::TrackDatasetJob {
+        dataset: teddy_clip(),
+        camera: fr3_camera_file(),
+        first_frame: 0,
+        max_frames: None,
+        qvga: false,
+        start_at_ground_truth: false,
+        trajectory: Some(dir.join("dataset.txt")),
+    };
+    mrsmap::app::track_dataset::run(&config, &job).expect("tracks the dataset");
+    let body = |t: &str| t.lines().filter(|l| !l.starts_with('#')).map(str::to_string).collect::<Vec<_>>();
+    let from_dataset = std::fs::read_to_string(dir.join("dataset.txt")).expect("trajectory");
+    assert_eq!(body(&outputs[0].1), body(&from_dataset));
+    assert_eq!(body(&from_dataset).len(), 8);
+}
+
+/// Writes a recording of `frames` synthetic frames with a custom depth message.
+fn write_custom(path: &Path, with_info: bool, depth: impl Fn(&mut Vec<u8>) -> (u32, u32, &'static str)) {
+    let mut file = McapFile::create(path, mcap::Compression::Lz4).expect("create");
+    let t = RecordingTopics::default();
+    let image = mrsmap::io::ros2::image_schema();
+    let c = file.add_ros2_channel(&t.color, "sensor_msgs/msg/Image", &image).expect("channel");
+    let d = file.add_ros2_channel(&t.depth, "sensor_msgs/msg/Image", &image).expect("channel");
+    let info =
+        file.add_ros2_channel(&t.camera_info, "sensor_msgs/msg/CameraInfo", &mrsmap::io::ros2::camera_info_schema());
+    let info = info.expect("channel");
+    let header = |ns| Header { stamp: Time::from_ns(ns), frame_id: "cam".into() };
+    let rgb = expected_rgb(0);
+    let mut bytes = Vec::new();
+    for i in 0..3u64 {
+        let ns = 1_000_000_000 + i * 33_000_000;
+        if with_info {
+            let k = [50.0, 0.0, 32.0, 0.0, 50.0, 24.0, 0.0, 0.0, 1.0];
+            let m = CameraInfo {
+                header: header(ns),
+                height: H as u32,
+                width: W as u32,
+                distortion_model: "plumb_bob".into(),
+                d: vec![0.0; 5],
+                k,
+                r: [0.0; 9],
+                p: [0.0; 12],
+                binning_x: 0,
+                binning_y: 0,
+                roi: RegionOfInterest::default(),
+            };
+            file.write_cdr(info, ns, &m).expect("write");
+        }
+        let colour = Image {
+            header: header(ns),
+            height: H as u32,
+            width: W as u32,
+            encoding: "rgb8".into(),
+            is_bigendian: 0,
+            step: 3 * W as u32,
+            data: &rgb,
+        };
+        file.write_cdr(c, ns, &colour).expect("write");
+        let (width, height, encoding) = depth(&mut bytes);
+        let step = (bytes.len() as u32).checked_div(height).unwrap_or(0);
+        let m =
+            Image { header: header(ns), height, width, encoding: encoding.into(), is_bigendian: 0, step, data: &bytes };
+        file.write_cdr(d, ns, &m).expect("write");
+    }
+    file.finish().expect("finish");
+}
+
+fn mm_depth(bytes: &mut Vec<u8>, w: usize, h: usize) {
+    bytes.clear();
+    bytes.extend((0..w * h).flat_map(|_| 800u16.to_le_bytes()));
+}
+
+fn first_error(path: &Path, camera: Option<mrsmap::geometry::CameraModel>) -> RecordingError {
+    let mut reader = RecordingReader::open(path, RecordingTopics::default(), camera).expect("opens");
+    loop {
+        match reader.next_frame() {
+            Ok(Some(_)) => {}
+            Ok(None) => panic!("{} read without error", path.display()),
+            Err(e) => return e,
+        }
+    }
+}
+
+#[test]
+fn bad_recordings_give_errors_naming_topic_and_message() {
+    let dir = temp_dir("mcap-bad");
+    let unknown = dir.join("unknown.mcap");
+    write_custom(&unknown, true, |b| {
+        b.clear();
+        b.resize(W * H * 2, 0);
+        (W as u32, H as u32, "yuv422")
+    });
+    let e = first_error(&unknown, None).to_string();
+    assert!(e.contains("topic /camera/depth/image_raw, message 0") && e.contains("'yuv422'"), "{e}");
+
+    let no_info = dir.join("no_info.mcap");
+    write_custom(&no_info, false, |b| {
+        mm_depth(b, W, H);
+        (W as u32, H as u32, "16UC1")
+    });
+    let e = first_error(&no_info, None);
+    assert!(matches!(e, RecordingError::NoCalibration { index: 0, .. }), "{e}");
+    assert!(e.to_string().contains("/camera/color/camera_info"), "{e}");
+    // A camera file instead of the calibration topic.
+    let mut camera = vga();
+    (camera.width, camera.height) = (W as u32, H as u32);
+    let mut reader = RecordingReader::open(&no_info, RecordingTopics::default(), Some(camera)).expect("opens");
+    let frame = reader.next_frame().expect("reads").expect("a frame");
+    assert_eq!(frame.camera.depth_scale_m, 1e-3, "16UC1 is in millimetres");
+
+    let mismatched = dir.join("mismatched.mcap");
+    write_custom(&mismatched, true, |b| {
+        mm_depth(b, W / 2, H / 2);
+        (W as u32 / 2, H as u32 / 2, "16UC1")
+    });
+    let e = first_error(&mismatched, None).to_string();
+    assert!(
+        e.contains("topic /camera/depth/image_raw, message 0") && e.contains("32×24") && e.contains("64×48"),
+        "{e}"
+    );
+
+    let short = dir.join("short.mcap");
+    write_custom(&short, true, |b| {
+        mm_depth(b, W, H / 2);
+        (W as u32, H as u32, "16UC1")
+    });
+    let e = first_error(&short, None).to_string();
+    assert!(e.contains("message 0") && e.contains("needs"), "{e}");
+
+    let not_mcap = dir.join("not.mcap");
+    std::fs::write(&not_mcap, b"this is not a recording").expect("write");
+    let e = RecordingReader::open(&not_mcap, RecordingTopics::default(), None).expect_err("not MCAP").to_string();
+    assert!(e.contains("not.mcap"), "{e}");
+}
+
+#[test]
+fn a_truncated_recording_replays_up_to_the_damage() {
+    let dir = temp_dir("mcap-truncated");
+    let recording = convert_clip(&dir, DepthEncoding::Mm16);
+    let bytes = std::fs::read(&recording).expect("read");
+    let cut = dir.join("cut.mcap");
+    std::fs::write(&cut, &bytes[..bytes.len() * 6 / 10]).expect("write");
+    let mut reader = RecordingReader::open(&cut, RecordingTopics::default(), None).expect("opens");
+    assert_eq!(reader.mode(), ReadMode::Streamed, "no summary: streamed");
+    let mut frames = 0;
+    while reader.next_frame().expect("frames before the damage decode").is_some() {
+        frames += 1;
+    }
+    assert!((1..8).contains(&frames), "{frames} frames before the damage");
+    let damage = reader.damage().expect("damage reported");
+    assert!(damage.messages_before >= 3 * frames as u64, "{damage:?}");
+
+    // Through the command line: exit 0, the frames before the damage tracked, a warning.
+    let config = write_tracker_config(&dir, "truncated", "");
+    let out = std::process::Command::new(mrsmap_bin())
+        .args(["replay", "--input"])
+        .arg(&cut)
+        .arg("--config")
+        .arg(&config)
+        .arg("--trajectory")
+        .arg(dir.join("cut.txt"))
+        .output()
+        .expect("runs");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}{}", String::from_utf8_lossy(&out.stderr));
+    assert!(stdout.contains("damaged") && stdout.contains(&format!("{frames} tracked")), "{stdout}");
+    let lines = std::fs::read_to_string(dir.join("cut.txt")).expect("trajectory");
+    assert_eq!(lines.lines().filter(|l| !l.starts_with('#')).count(), frames);
+}
+
+#[test]
+fn a_recording_written_by_mrsmap_reads_back() {
+    let dir = temp_dir("mcap-roundtrip");
+    let path = dir.join("frames.mcap");
+    let mut file = McapFile::create(&path, mcap::Compression::Zstd).expect("create");
+    let t = RecordingTopics::default();
+    let channels =
+        FrameChannels::add(&mut file, [&t.color, &t.depth, &t.camera_info], DepthEncoding::Mm16).expect("add");
+    let mut camera = vga();
+    (camera.width, camera.height, camera.depth_scale_m) = (W as u32, H as u32, 1e-3);
+    let rgb = expected_rgb(1);
+    let depth = expected_depth_mm(1);
+    let frame = mrsmap::frame::RgbdFrame::new(2_000_000_000, camera, &rgb, &depth).expect("frame");
+    channels.write_frame(&mut file, &frame, 1_990_000_000, &mut Vec::new()).expect("write");
+    file.finish().expect("finish");
+    let mut reader = RecordingReader::open(&path, t, None).expect("opens");
+    let back = reader.next_frame().expect("reads").expect("a frame");
+    assert_eq!((back.stamp_ns, back.rgb, back.depth), (frame.stamp_ns, frame.rgb, frame.depth));
+    assert_eq!(back.camera, frame.camera);
+}
