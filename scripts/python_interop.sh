@@ -14,3 +14,14 @@ sed -e "s#^service = \"mrsmap/camera0\"#service = \"$TAG/camera\"#" \
 target/release/mrsmap track --config "$OUT/tracker.toml" --idle-timeout 20 > "$OUT/tracker.txt" 2> "$OUT/tracker.err" &
 until grep -q ready "$OUT/tracker.err" 2>/dev/null; do sleep 0.1; done
 IOX2_LOG_LEVEL=Error python3 scripts/python_driver.py tests/data/fr3_teddy_8 --service "$TAG/camera" --poses "$TAG/poses"
+
+# MCAP: what mrsmap writes, read by the Python mcap readers with their ROS 2 and protobuf
+# decoders (the other direction, Python-written files read by mrsmap, is in
+# tests/mcap_replay.rs with the fixtures of scripts/make_mcap_fixture.py).
+python3 -m pip install --quiet --disable-pip-version-check 'mcap==1.6.0' 'mcap-ros2-support==0.6.0' \
+    'mcap-protobuf-support==0.6.0' 'foxglove-schemas-protobuf==0.4.0' >/dev/null 2>&1
+target/release/mrsmap convert tum-to-mcap tests/data/fr3_teddy_8 --out "$OUT/teddy.mcap"
+target/release/mrsmap replay --input "$OUT/teddy.mcap" --config robot_config/tracker.toml \
+    --out "$OUT/poses.mcap" --trajectory "$OUT/poses.txt"
+python3 scripts/mcap_interop.py tests/data/fr3_teddy_8 robot_config/cameras/tum_fr3.toml \
+    "$OUT/teddy.mcap" "$OUT/poses.mcap" "$OUT/poses.txt"
