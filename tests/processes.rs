@@ -250,3 +250,47 @@ fn missing_or_corrupt_models_stop_the_tracker_at_start_with_a_clear_error() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("truncated") && err.contains("cut.mrsm"), "{err}");
 }
+
+#[test]
+fn camera_replays_mcap_and_the_tracker_records_what_it_receives() {
+    let dir = temp_dir("mcap-live");
+    let recording = dir.join("teddy.mcap");
+    let out = Command::new(mrsmap_bin())
+        .args(["convert", "tum-to-mcap", path(&teddy_clip()), "--out", path(&recording)])
+        .output()
+        .expect("convert runs");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let config_path = write_tracker_config(&dir, "mcaplive", "");
+    let config = read_tracker_config(&config_path).expect("config");
+    let recorded = dir.join("recorded.mcap");
+    let (tracker, tracker_err) = start(&["track", "--config", path(&config_path), "--record", path(&recorded)]);
+    wait_for(&tracker_err, "ready", 60);
+    let (client, client_err) = start(&["poses", "--service", &config.poses_service, "--count", "8", "--timeout", "30"]);
+    wait_for(&client_err, "reading", 30);
+    let (camera, _) =
+        start(&["camera", "--mcap", path(&recording), "--service", &config.camera_service, "--rate", "10"]);
+    assert_eq!(finish(camera, 60).0, Some(0), "the driver sends the 8 frames of the recording and exits");
+    let (code, out) = finish(client, 60);
+    assert_eq!(code, Some(0), "client: {out}");
+    assert!(out.contains("8 tracking"), "{out}");
+    signal(&tracker.0, "INT");
+    let (code, out) = finish(tracker, 30);
+    assert_eq!(code, Some(0), "clean shutdown on SIGINT: {out}");
+    assert!(!dir.join("recorded.mcap.partial").exists(), "the recording was finished");
+    // The recording holds the 8 frames and the tracker's poses: replaying it tracks the
+    // same frames, and its pose topics hold one pose per frame.
+    let replayed = Command::new(mrsmap_bin())
+        .args(["replay", "--input", path(&recorded), "--config", path(&config_path)])
+        .output()
+        .expect("replay runs");
+    let stdout = String::from_utf8_lossy(&replayed.stdout);
+    assert!(replayed.status.success(), "{stdout}{}", String::from_utf8_lossy(&replayed.stderr));
+    assert!(stdout.contains("8 frames paired") && stdout.contains("8 frames tracking"), "{stdout}");
+    let mut poses = mrsmap::io::mcap_source::McapSource::open(&recorded, &["/mrsmap/teddy/pose"]).expect("opens");
+    let mut count = 0;
+    while let Some(m) = poses.next_message() {
+        m.expect("pose message");
+        count += 1;
+    }
+    assert_eq!(count, 8, "one recorded pose per tracked frame");
+}

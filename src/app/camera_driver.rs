@@ -1,25 +1,47 @@
-//! `mrsmap camera`: a camera driver that publishes a recorded TUM RGB-D sequence over
-//! iceoryx2, frame by frame, written straight into loaned shared-memory samples, and
-//! notifies an event so that subscribers wake up.
+//! `mrsmap camera`: a camera driver that publishes a recorded RGB-D sequence (a TUM
+//! dataset or an MCAP recording) over iceoryx2, frame by frame, written straight into
+//! loaned shared-memory samples, and notifies an event so that subscribers wake up.
 
 use super::report::log_line;
+use crate::frame::RgbdFrame;
+use crate::geometry::CameraModel;
 use crate::io::camera_file::read_camera;
-use crate::io::frames::FrameLoader;
+use crate::io::frames::{FrameLoader, halve};
 use crate::io::ipc::{self, FrameSize, Ipc, IpcError, now_ns};
+use crate::io::recording::{RecordingReader, RecordingTopics};
 use crate::io::tum::{DatasetFrame, TumDataset, format_stamp};
 use crate::io::wire::{FrameHeader, RgbdFrameQvga, RgbdFrameVga, WireFrame, write_frame};
 use anyhow::{Context, Result, bail};
 use iceoryx2::node::Node;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
+
+/// Where the frames come from.
+#[derive(Debug, Clone)]
+pub enum CameraInput {
+    /// A TUM dataset folder and its camera file.
+    Dataset {
+        /// Folder.
+        dataset: PathBuf,
+        /// Camera file.
+        camera: PathBuf,
+    },
+    /// An MCAP recording (calibration from its CameraInfo unless a camera is given).
+    Mcap {
+        /// File.
+        path: PathBuf,
+        /// Topics.
+        topics: RecordingTopics,
+        /// Camera file replacing the calibration topic.
+        camera: Option<PathBuf>,
+    },
+}
 
 /// What to publish.
 #[derive(Debug, Clone)]
 pub struct CameraJob {
-    /// Dataset folder (TUM layout).
-    pub dataset: PathBuf,
-    /// Camera file.
-    pub camera: PathBuf,
+    /// The frames.
+    pub input: CameraInput,
     /// Service prefix (`<service>/rgbd/vga|qvga`).
     pub service: String,
     /// Frames per second (0: as fast as the subscribers take them).
@@ -51,78 +73,185 @@ struct Decoded {
     depth: Vec<u16>,
 }
 
-/// Publishes the dataset until its end (or forever with `repeat`), a signal, or
+struct Recording {
+    path: PathBuf,
+    topics: RecordingTopics,
+    camera: Option<CameraModel>,
+    reader: RecordingReader,
+    skip: usize,
+    half: bool,
+    rgb: Vec<u8>,
+    depth: Vec<u16>,
+}
+
+/// The frames to publish, one at a time.
+enum Source {
+    Dataset { loader: Box<FrameLoader>, frames: Vec<DatasetFrame>, cache: Vec<Decoded>, index: usize },
+    Recording(Box<Recording>),
+}
+
+fn open_dataset(job: &CameraJob, dataset: &Path, camera: &Path) -> Result<(Source, FrameSize, String)> {
+    let camera_model = read_camera(camera)?;
+    let data = TumDataset::open(dataset).with_context(|| format!("opening dataset {}", dataset.display()))?;
+    let frames: Vec<DatasetFrame> = data.frames.iter().skip(job.first_frame).cloned().collect();
+    if frames.is_empty() {
+        bail!("no frames to publish (the dataset has {}, --first-frame {})", data.frames.len(), job.first_frame);
+    }
+    let size = if job.qvga { FrameSize::Qvga } else { FrameSize::Vga };
+    let mut loader = FrameLoader::new(camera_model, job.qvga);
+    let out = loader.camera();
+    if (out.width, out.height) != size.dimensions() {
+        bail!(
+            "the camera file {} describes {}x{} images; the wire carries 640x480 (or 320x240 with --qvga)",
+            camera.display(),
+            camera_model.width,
+            camera_model.height
+        );
+    }
+    // Short clips are decoded once (a loop would decode them again and again).
+    let mut cache = Vec::new();
+    if frames.len() <= 64 {
+        for entry in &frames {
+            let f = loader.load(entry)?;
+            cache.push(Decoded { stamp_ns: f.stamp_ns, rgb: f.rgb.to_vec(), depth: f.depth.to_vec() });
+        }
+    }
+    let what = format!("{} frames of {}", frames.len(), dataset.display());
+    Ok((Source::Dataset { loader: Box::new(loader), frames, cache, index: 0 }, size, what))
+}
+
+fn open_recording(
+    job: &CameraJob,
+    path: &Path,
+    topics: &RecordingTopics,
+    camera: Option<&Path>,
+) -> Result<(Source, FrameSize, String)> {
+    let camera = camera.map(read_camera).transpose()?;
+    let open = || RecordingReader::open(path, topics.clone(), camera);
+    // The first frame's size decides the wire type: VGA (or QVGA with --qvga, halved),
+    // or a QVGA recording as it is.
+    let mut probe = open()?;
+    let first = probe.next_frame()?.with_context(|| format!("{}: no RGB-D frame in the recording", path.display()))?;
+    let (size, half) = match ((first.camera.width, first.camera.height), job.qvga) {
+        ((640, 480), false) => (FrameSize::Vga, false),
+        ((640, 480), true) => (FrameSize::Qvga, true),
+        ((320, 240), _) => (FrameSize::Qvga, false),
+        ((w, h), _) => bail!("{}: {w}x{h} images; the wire carries 640x480 or 320x240", path.display()),
+    };
+    let reader = open()?;
+    let mut recording = Recording {
+        path: path.to_path_buf(),
+        topics: topics.clone(),
+        camera,
+        reader,
+        skip: job.first_frame,
+        half,
+        rgb: Vec::new(),
+        depth: Vec::new(),
+    };
+    recording.skip_first()?;
+    let what = format!("the frames of {}", path.display());
+    Ok((Source::Recording(Box::new(recording)), size, what))
+}
+
+impl Recording {
+    /// Skips `--first-frame` frames.
+    fn skip_first(&mut self) -> Result<()> {
+        for _ in 0..self.skip {
+            if self.reader.next_frame()?.is_none() {
+                bail!("--first-frame {} is past the end of {}", self.skip, self.path.display());
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Source {
+    /// The next frame; `Ok(None)` at the end; `Ok(Some(Err))` for an unreadable frame
+    /// (skipped); `Err` when the input cannot go on.
+    fn next(&mut self) -> Result<Option<Result<RgbdFrame<'_>, String>>> {
+        match self {
+            Source::Dataset { loader, frames, cache, index } => {
+                let Some(entry) = frames.get(*index) else { return Ok(None) };
+                *index += 1;
+                if let Some(d) = cache.get(*index - 1) {
+                    return Ok(Some(Ok(RgbdFrame::new(d.stamp_ns, loader.camera(), &d.rgb, &d.depth)?)));
+                }
+                let stamp = format_stamp(entry.depth_stamp_ns);
+                Ok(Some(loader.load(entry).map_err(|e| format!("frame {stamp}: {e}"))))
+            }
+            Source::Recording(r) => {
+                let Recording { reader, half, rgb, depth, .. } = &mut **r;
+                let Some(frame) = reader.next_frame()? else { return Ok(None) };
+                if *half {
+                    return Ok(Some(halve(&frame, rgb, depth).map_err(|e| e.to_string())));
+                }
+                Ok(Some(Ok(frame)))
+            }
+        }
+    }
+
+    /// Says where a recording was damaged, once its end is reached.
+    fn report_damage(&self) {
+        if let Source::Recording(r) = self
+            && let Some(d) = r.reader.damage()
+        {
+            log_line(format_args!(
+                "camera: {} is damaged after {} messages ({}); published up to the damage",
+                r.path.display(),
+                d.messages_before,
+                d.reason
+            ));
+        }
+    }
+
+    fn rewind(&mut self) -> Result<()> {
+        match self {
+            Source::Dataset { index, .. } => *index = 0,
+            Source::Recording(r) => {
+                r.reader = RecordingReader::open(&r.path, r.topics.clone(), r.camera)?;
+                r.skip_first()?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Publishes the frames until their end (or forever with `repeat`), a signal, or
 /// `max_frames`.
 pub fn run(job: &CameraJob) -> Result<CameraSummary> {
-    let camera = read_camera(&job.camera)?;
-    let dataset =
-        TumDataset::open(&job.dataset).with_context(|| format!("opening dataset {}", job.dataset.display()))?;
-    let frames: Vec<DatasetFrame> = dataset.frames.iter().skip(job.first_frame).cloned().collect();
-    if frames.is_empty() {
-        bail!("no frames to publish (the dataset has {}, --first-frame {})", dataset.frames.len(), job.first_frame);
-    }
     if !(job.rate_hz.is_finite() && job.rate_hz >= 0.0) {
         bail!("--rate must be a frequency >= 0 (0: as fast as possible)");
     }
+    let (source, size, what) = match &job.input {
+        CameraInput::Dataset { dataset, camera } => open_dataset(job, dataset, camera)?,
+        CameraInput::Mcap { path, topics, camera } => open_recording(job, path, topics, camera.as_deref())?,
+    };
     let node = ipc::node("mrsmap_camera")?;
-    let size = if job.qvga { FrameSize::Qvga } else { FrameSize::Vga };
-    let (w, h) = size.dimensions();
-    let loader = FrameLoader::new(camera, job.qvga);
-    let out_camera = loader.camera();
-    if (out_camera.width, out_camera.height) != (w, h) {
-        bail!(
-            "the camera file {} describes {}x{} images; the wire carries 640x480 (or 320x240 with --qvga)",
-            job.camera.display(),
-            camera.width,
-            camera.height
-        );
-    }
     match size {
-        FrameSize::Vga => publish::<RgbdFrameVga>(job, &node, loader, &frames),
-        FrameSize::Qvga => publish::<RgbdFrameQvga>(job, &node, loader, &frames),
+        FrameSize::Vga => publish::<RgbdFrameVga>(job, &node, source, size, &what),
+        FrameSize::Qvga => publish::<RgbdFrameQvga>(job, &node, source, size, &what),
     }
 }
 
 fn publish<F: WireFrame>(
     job: &CameraJob,
     node: &Node<Ipc>,
-    mut loader: FrameLoader,
-    frames: &[DatasetFrame],
+    mut source: Source,
+    size: FrameSize,
+    what: &str,
 ) -> Result<CameraSummary> {
-    let size = if job.qvga { FrameSize::Qvga } else { FrameSize::Vga };
     let name = size.service(&job.service);
     let service = ipc::frames::<F>(node, &name)?;
     let events = ipc::events(node, &name)?;
     let publisher =
         service.publisher_builder().create().map_err(|e| IpcError::new(format!("publisher on {name}"), e))?;
     let notifier = events.notifier_builder().create().map_err(|e| IpcError::new(format!("notifier on {name}"), e))?;
-    let camera = loader.camera();
-    // Short clips are decoded once (a loop would decode them again and again).
-    let preload = frames.len() <= 64;
-    let mut cache: Vec<Decoded> = Vec::new();
-    if preload {
-        for entry in frames {
-            let f = loader.load(entry)?;
-            cache.push(Decoded { stamp_ns: f.stamp_ns, rgb: f.rgb.to_vec(), depth: f.depth.to_vec() });
-        }
-    }
     let period = if job.rate_hz > 0.0 { Duration::from_secs_f64(1.0 / job.rate_hz) } else { Duration::ZERO };
     let mut summary = CameraSummary { sent: 0, unreadable: 0, signalled: false };
     let mut next = Instant::now();
-    let mut index = 0usize;
-    log_line(format_args!(
-        "camera: publishing {} frames of {} on {name}{}",
-        frames.len(),
-        job.dataset.display(),
-        if job.repeat { ", repeating" } else { "" }
-    ));
+    log_line(format_args!("camera: publishing {what} on {name}{}", if job.repeat { ", repeating" } else { "" }));
     loop {
-        if index == frames.len() {
-            if !job.repeat {
-                break;
-            }
-            index = 0;
-        }
         if job.max_frames.is_some_and(|m| summary.sent >= m) {
             break;
         }
@@ -132,29 +261,29 @@ fn publish<F: WireFrame>(
             break;
         }
         next = Instant::now().max(next) + period;
-        let entry = &frames[index];
-        index += 1;
-        let mut header = FrameHeader::for_camera(&camera, entry.depth_stamp_ns, summary.sent);
-        let loan = publisher.loan_uninit().map_err(|e| IpcError::new(format!("loaning a frame on {name}"), e))?;
-        let written = if preload {
-            let d = &cache[index - 1];
-            header.capture_stamp_ns = d.stamp_ns;
-            header.send_stamp_ns = now_ns();
-            write_frame(loan, &header, &d.rgb, &d.depth)
-        } else {
-            match loader.load(entry) {
-                Ok(f) => {
-                    header.send_stamp_ns = now_ns();
-                    write_frame(loan, &header, f.rgb, f.depth)
-                }
-                Err(e) => {
-                    log_line(format_args!("camera: skipping frame {}: {e}", format_stamp(entry.depth_stamp_ns)));
-                    summary.unreadable += 1;
-                    continue;
-                }
+        let frame = match source.next()? {
+            Some(Ok(frame)) => frame,
+            Some(Err(e)) => {
+                log_line(format_args!("camera: skipping {e}"));
+                summary.unreadable += 1;
+                continue;
+            }
+            None if job.repeat && summary.sent > 0 => {
+                source.report_damage();
+                source.rewind()?;
+                continue;
+            }
+            None => {
+                source.report_damage();
+                break;
             }
         };
-        written?.send().map_err(|e| IpcError::new(format!("sending on {name}"), e))?;
+        let mut header = FrameHeader::for_camera(&frame.camera, frame.stamp_ns, summary.sent);
+        let loan = publisher.loan_uninit().map_err(|e| IpcError::new(format!("loaning a frame on {name}"), e))?;
+        header.send_stamp_ns = now_ns();
+        write_frame(loan, &header, frame.rgb, frame.depth)?
+            .send()
+            .map_err(|e| IpcError::new(format!("sending on {name}"), e))?;
         notifier.notify().map_err(|e| IpcError::new(format!("notifying on {name}"), e))?;
         summary.sent += 1;
     }

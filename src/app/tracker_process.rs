@@ -8,6 +8,7 @@
 //! listener's timed wait none. The wait times out every 250 ms to notice signals and an
 //! idle camera.
 
+use super::recorder::{RecordOptions, RecordStats, Recorder};
 use super::report::{log_line, percentile};
 use super::tracking::{StepOutput, invalid_frame, load_tracker, pose_message, track_frame};
 use crate::io::ipc::{self, FrameSize, Ipc, IpcError, now_ns};
@@ -94,6 +95,7 @@ struct Core<F: WireFrame> {
     track_ms: Vec<f64>,
     latency_ms: Vec<f64>,
     last_sequence: Option<u64>,
+    recorder: Option<Recorder>,
 }
 
 impl<F: WireFrame> LiveTracker<F> {
@@ -140,6 +142,7 @@ impl<F: WireFrame> LiveTracker<F> {
             track_ms: Vec::with_capacity(RING),
             latency_ms: Vec::with_capacity(RING),
             last_sequence: None,
+            recorder: None,
         };
         Ok(LiveTracker { node, listener, core })
     }
@@ -187,6 +190,26 @@ impl<F: WireFrame> LiveTracker<F> {
         Ok(summary)
     }
 
+    /// Records the frames and poses of the run into MCAP (see [`Recorder`]).
+    pub fn record(&mut self, options: &RecordOptions) -> Result<()> {
+        let camera = crate::geometry::CameraModel {
+            width: F::WIDTH,
+            height: F::HEIGHT,
+            intrinsics: crate::geometry::PinholeIntrinsics { fx: 1.0, fy: 1.0, cx: 0.0, cy: 0.0 },
+            distortion: [0.0; 5],
+            depth_scale_m: 1e-3,
+        };
+        let pixels = (F::WIDTH * F::HEIGHT) as usize;
+        self.core.recorder = Some(Recorder::start(options, &self.core.names, pixels, camera)?);
+        log_line(format_args!("tracker: recording to {}", options.path.display()));
+        Ok(())
+    }
+
+    /// Finishes the recording, if there is one.
+    pub fn finish_recording(&mut self) -> Result<Option<RecordStats>> {
+        self.core.recorder.take().map(Recorder::finish).transpose()
+    }
+
     /// The node (to list or clean up services).
     pub fn node(&self) -> &Node<Ipc> {
         &self.node
@@ -231,7 +254,6 @@ impl<F: WireFrame> Core<F> {
                 true
             }
         };
-        drop(sample);
         let total_ms = received.elapsed().as_secs_f32() * 1e3;
         for (k, entry) in self.entries.iter().enumerate() {
             entry.update_with_copy(pose_message(
@@ -243,6 +265,11 @@ impl<F: WireFrame> Core<F> {
             ));
         }
         self.notifier.notify().map_err(|e| IpcError::new("notifying pose subscribers", e))?;
+        // Recorded after the poses are out: the copy does not delay them.
+        if let (Some(recorder), Ok(frame)) = (&mut self.recorder, message.frame()) {
+            recorder.record(&frame, &self.out);
+        }
+        drop(sample);
         summary.frames += 1;
         if !invalid && self.track_ms.len() < RING {
             self.track_ms.push(f64::from(self.out.build_ms[0] + self.out.register_ms[0]));
@@ -253,12 +280,32 @@ impl<F: WireFrame> Core<F> {
     }
 }
 
-/// Runs the tracker process described by `config` until SIGINT/SIGTERM or a limit.
-pub fn run(config: &TrackerConfig, limits: &RunLimits) -> Result<RunSummary> {
+/// Runs the tracker process described by `config` until SIGINT/SIGTERM or a limit,
+/// recording into MCAP if asked.
+pub fn run(config: &TrackerConfig, limits: &RunLimits, record: Option<&RecordOptions>) -> Result<RunSummary> {
     match config.frame_size {
-        FrameSize::Vga => LiveTracker::<RgbdFrameVga>::start(config)?.run(limits, &mut |_| {}),
-        FrameSize::Qvga => LiveTracker::<RgbdFrameQvga>::start(config)?.run(limits, &mut |_| {}),
+        FrameSize::Vga => run_live(LiveTracker::<RgbdFrameVga>::start(config)?, limits, record),
+        FrameSize::Qvga => run_live(LiveTracker::<RgbdFrameQvga>::start(config)?, limits, record),
     }
+}
+
+fn run_live<F: WireFrame>(
+    mut live: LiveTracker<F>,
+    limits: &RunLimits,
+    record: Option<&RecordOptions>,
+) -> Result<RunSummary> {
+    if let Some(options) = record {
+        live.record(options)?;
+    }
+    let summary = live.run(limits, &mut |_| {});
+    // The recording is finished whatever ended the loop: nothing recorded is lost.
+    if let Some(stats) = live.finish_recording()? {
+        log_line(format_args!(
+            "tracker: {} frames recorded ({} left out: the writer was behind)",
+            stats.written, stats.dropped
+        ));
+    }
+    summary
 }
 
 /// Prints the summary of a run.

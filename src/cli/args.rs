@@ -75,11 +75,17 @@ pub struct MapArgs {
 #[derive(Args)]
 pub struct CameraArgs {
     /// Dataset folder in TUM layout.
+    #[arg(long, required_unless_present = "mcap", conflicts_with = "mcap")]
+    pub dataset: Option<PathBuf>,
+    /// An MCAP recording to publish instead (see `mrsmap replay --help` for what it may
+    /// hold); 640x480 recordings go out as VGA (QVGA with --qvga), 320x240 as QVGA.
     #[arg(long)]
-    pub dataset: PathBuf,
-    /// Camera file of the dataset.
-    #[arg(long)]
-    pub camera: PathBuf,
+    pub mcap: Option<PathBuf>,
+    /// Camera file of the dataset (with --mcap: replaces the recording's CameraInfo).
+    #[arg(long, required_unless_present = "mcap")]
+    pub camera: Option<PathBuf>,
+    #[command(flatten)]
+    pub topics: TopicArgs,
     /// Service prefix; the tracker's config names the same (camera.service).
     #[arg(long, default_value = "mrsmap/camera0")]
     pub service: String,
@@ -117,6 +123,14 @@ pub struct TrackArgs {
     /// Stop after this many seconds without a frame (live mode).
     #[arg(long)]
     pub idle_timeout: Option<f64>,
+    /// Record the frames received and the poses published into this MCAP file (live
+    /// mode), finished on Ctrl-C/SIGTERM; `mrsmap replay` reads it.
+    #[arg(long, conflicts_with = "dataset")]
+    pub record: Option<PathBuf>,
+    /// Keep only the last this many seconds in the recording (held in memory, about
+    /// 55 MB per second of VGA at 30 Hz, and written at the end).
+    #[arg(long, requires = "record")]
+    pub record_last: Option<f64>,
     /// Offline: track every frame of this TUM dataset instead of listening to a camera.
     #[arg(long)]
     pub dataset: Option<PathBuf>,

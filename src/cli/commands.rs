@@ -54,7 +54,8 @@ pub fn track(a: TrackArgs) -> Result<()> {
         max_frames: a.max_frames,
         idle_timeout: seconds(a.idle_timeout, "--idle-timeout")?,
     };
-    let summary = app::tracker_process::run(&config, &limits)?;
+    let record = a.record.map(|path| app::recorder::RecordOptions { path, last_seconds: a.record_last });
+    let summary = app::tracker_process::run(&config, &limits, record.as_ref())?;
     app::tracker_process::print_summary(&config, &summary);
     Ok(())
 }
@@ -129,9 +130,13 @@ pub fn model(command: ModelCommand) -> Result<()> {
 
 /// `mrsmap camera`.
 pub fn camera(a: CameraArgs) -> Result<()> {
+    let input = match (a.dataset, a.mcap, a.camera) {
+        (Some(dataset), None, Some(camera)) => app::camera_driver::CameraInput::Dataset { dataset, camera },
+        (None, Some(path), camera) => app::camera_driver::CameraInput::Mcap { path, topics: a.topics.topics(), camera },
+        _ => anyhow::bail!("give --dataset DIR --camera FILE, or --mcap FILE"),
+    };
     let job = app::camera_driver::CameraJob {
-        dataset: a.dataset,
-        camera: a.camera,
+        input,
         service: a.service,
         rate_hz: a.rate,
         qvga: a.qvga,

@@ -66,20 +66,31 @@ impl FrameLoader {
         }
         let camera = self.camera();
         if self.half {
-            let (w, h) = (camera.width as usize, camera.height as usize);
-            let full_w = self.camera.width as usize;
-            self.rgb.clear();
-            self.depth.clear();
-            for v in 0..h {
-                for u in 0..w {
-                    let src = 2 * v * full_w + 2 * u;
-                    self.depth.push(self.depth_full[src]);
-                    self.rgb.extend_from_slice(&self.rgb_full[3 * src..3 * src + 3]);
-                }
-            }
-            Ok(RgbdFrame::new(entry.depth_stamp_ns, camera, &self.rgb, &self.depth)?)
+            let full = RgbdFrame::new(entry.depth_stamp_ns, self.camera, &self.rgb_full, &self.depth_full)?;
+            Ok(halve(&full, &mut self.rgb, &mut self.depth)?)
         } else {
             Ok(RgbdFrame::new(entry.depth_stamp_ns, camera, &self.rgb_full, &self.depth_full)?)
         }
     }
+}
+
+/// `frame` subsampled by two (every other pixel and row), into `rgb` and `depth`.
+pub fn halve<'a>(
+    frame: &RgbdFrame<'_>,
+    rgb: &'a mut Vec<u8>,
+    depth: &'a mut Vec<u16>,
+) -> Result<RgbdFrame<'a>, FrameError> {
+    let camera = frame.camera.halved();
+    let (w, h) = (camera.width as usize, camera.height as usize);
+    let full_w = frame.width();
+    rgb.clear();
+    depth.clear();
+    for v in 0..h {
+        for u in 0..w {
+            let src = 2 * v * full_w + 2 * u;
+            depth.push(frame.depth[src]);
+            rgb.extend_from_slice(&frame.rgb[3 * src..3 * src + 3]);
+        }
+    }
+    RgbdFrame::new(frame.stamp_ns, camera, rgb, depth)
 }

@@ -240,7 +240,7 @@ mod tests {
     #[test]
     fn depth_encodings_become_16_bit_with_their_scale() {
         let mut out = Vec::new();
-        assert_eq!(to_depth16(&view(PixelFormat::DepthMm16, 2, 4, &[0x10, 0x27, 0x27, 0x10], false), &mut out), 1e-3);
+        assert_eq!(to_depth16(&view(PixelFormat::DepthMm16, 2, 4, &[0x10, 0x27, 0x10, 0x27], false), &mut out), 1e-3);
         assert_eq!(out, [10000, 10000]);
         to_depth16(&view(PixelFormat::DepthMm16, 1, 2, &[0x27, 0x10], true), &mut out);
         assert_eq!(out, [10000]);

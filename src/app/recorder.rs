@@ -1,0 +1,252 @@
+//! Recording what the tracker receives and publishes into MCAP: the frames (ROS 2
+//! `Image` + `CameraInfo` on the default camera topics, so `mrsmap replay` reads the file
+//! as it is) and the poses (the replay's topics). The whole run, or a ring of the last N
+//! seconds written at the end.
+//!
+//! The tracker's loop only copies the frame into one of a few slots allocated at start-up
+//! and hands it over a bounded channel (neither allocates); a writer thread encodes,
+//! compresses and writes. When every slot is busy the frame is left out of the recording
+//! (counted), never delaying the tracker. The file is written as `<name>.partial` and
+//! renamed when finished, so a run stopped by SIGINT/SIGTERM leaves a complete file; one
+//! that crashes leaves a `.partial` file that replays up to its end.
+
+use super::tracking::StepOutput;
+use crate::frame::RgbdFrame;
+use crate::geometry::{CameraModel, Pose};
+use crate::io::mcap_write::{DepthEncoding, FrameChannels, McapFile, ObjectPoseRecord, PoseChannels};
+use crate::io::recording::RecordingTopics;
+use crate::tracking::TrackingStatus;
+use anyhow::{Context, Result, anyhow};
+use nalgebra::Matrix6;
+use std::collections::VecDeque;
+use std::path::PathBuf;
+use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
+use std::thread::JoinHandle;
+
+/// Frames in flight between the tracker and the writer thread.
+const SLOTS: usize = 6;
+
+/// What to record.
+#[derive(Debug, Clone)]
+pub struct RecordOptions {
+    /// The file to write.
+    pub path: PathBuf,
+    /// Keep only the last this many seconds (by frame stamp), written at the end.
+    pub last_seconds: Option<f64>,
+}
+
+/// What was recorded.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct RecordStats {
+    /// Frames written.
+    pub written: u64,
+    /// Frames left out because the writer was behind.
+    pub dropped: u64,
+}
+
+#[derive(Clone, Copy)]
+struct PoseSnapshot {
+    object: usize,
+    camera_from_object: Pose,
+    covariance_ros: Matrix6<f64>,
+}
+
+struct Slot {
+    stamp_ns: u64,
+    camera: CameraModel,
+    rgb: Vec<u8>,
+    depth: Vec<u16>,
+    poses: Vec<PoseSnapshot>,
+}
+
+impl Slot {
+    fn new(pixels: usize, objects: usize, camera: CameraModel) -> Box<Self> {
+        Box::new(Slot {
+            stamp_ns: 0,
+            camera,
+            rgb: Vec::with_capacity(3 * pixels),
+            depth: Vec::with_capacity(pixels),
+            poses: Vec::with_capacity(objects),
+        })
+    }
+}
+
+/// The tracker's side of the recording.
+pub struct Recorder {
+    free: Receiver<Box<Slot>>,
+    full: Option<SyncSender<Box<Slot>>>,
+    writer: Option<JoinHandle<Result<u64>>>,
+    dropped: u64,
+}
+
+impl std::fmt::Debug for Recorder {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Recorder").field("dropped", &self.dropped).finish_non_exhaustive()
+    }
+}
+
+impl Recorder {
+    /// Creates the file and starts the writer thread; slots hold frames of up to
+    /// `max_pixels` and the poses of `names`.
+    pub fn start(options: &RecordOptions, names: &[String], max_pixels: usize, camera: CameraModel) -> Result<Self> {
+        if options.last_seconds.is_some_and(|s| !(s.is_finite() && s > 0.0)) {
+            return Err(anyhow!("--record-last must be a positive number of seconds"));
+        }
+        let partial = options.path.with_extension("mcap.partial");
+        let mut file = McapFile::create(&partial, mcap::Compression::Lz4)
+            .with_context(|| format!("creating the recording {}", partial.display()))?;
+        let t = RecordingTopics::default();
+        let frames = FrameChannels::add(&mut file, [&t.color, &t.depth, &t.camera_info], DepthEncoding::M32)?;
+        let poses = PoseChannels::add(&mut file, names)?;
+        let (free_tx, free) = sync_channel(SLOTS);
+        let (full, full_rx) = sync_channel::<Box<Slot>>(SLOTS);
+        for _ in 0..SLOTS {
+            free_tx.send(Slot::new(max_pixels, names.len(), camera)).map_err(|_| anyhow!("recorder slots"))?;
+        }
+        let names = names.to_vec();
+        let (path, last_ns) = (options.path.clone(), options.last_seconds.map(|s| (s * 1e9) as u64));
+        let writer = std::thread::Builder::new()
+            .name("mrsmap-recorder".into())
+            .spawn(move || {
+                let mut out = Output { file, frames, poses, names, scratch: Vec::new(), written: 0 };
+                let mut ring: VecDeque<Box<Slot>> = VecDeque::new();
+                for slot in full_rx {
+                    match last_ns {
+                        None => {
+                            out.write(&slot)?;
+                            let _ = free_tx.send(slot);
+                        }
+                        Some(keep) => {
+                            keep_last(&mut ring, &slot, keep);
+                            let _ = free_tx.send(slot);
+                        }
+                    }
+                }
+                for slot in &ring {
+                    out.write(slot)?;
+                }
+                let written = out.written;
+                out.file.finish().with_context(|| format!("finishing {}", partial.display()))?;
+                std::fs::rename(&partial, &path).with_context(|| format!("renaming to {}", path.display()))?;
+                Ok(written)
+            })
+            .context("starting the recorder thread")?;
+        Ok(Recorder { free, full: Some(full), writer: Some(writer), dropped: 0 })
+    }
+
+    /// Hands a frame and the poses tracked in it to the writer; allocates nothing (the
+    /// frame must not exceed the slots' `max_pixels`).
+    pub fn record(&mut self, frame: &RgbdFrame<'_>, out: &StepOutput) {
+        let Ok(mut slot) = self.free.try_recv() else {
+            self.dropped += 1;
+            return;
+        };
+        slot.stamp_ns = frame.stamp_ns;
+        slot.camera = frame.camera;
+        slot.rgb.clear();
+        slot.rgb.extend_from_slice(frame.rgb);
+        slot.depth.clear();
+        slot.depth.extend_from_slice(frame.depth);
+        slot.poses.clear();
+        for (object, e) in out.estimates.iter().enumerate().take(slot.poses.capacity()) {
+            if e.status == TrackingStatus::Tracking {
+                slot.poses.push(PoseSnapshot {
+                    object,
+                    camera_from_object: e.camera_from_object,
+                    covariance_ros: e.covariance_ros,
+                });
+            }
+        }
+        match self.full.as_ref().map(|f| f.try_send(slot)) {
+            Some(Ok(())) => {}
+            Some(Err(TrySendError::Full(_) | TrySendError::Disconnected(_))) | None => self.dropped += 1,
+        }
+    }
+
+    /// Writes what is left and closes the file.
+    pub fn finish(mut self) -> Result<RecordStats> {
+        self.full = None;
+        let written = match self.writer.take().map(|w| w.join()) {
+            Some(Ok(result)) => result?,
+            Some(Err(_)) => return Err(anyhow!("the recorder thread failed")),
+            None => 0,
+        };
+        Ok(RecordStats { written, dropped: self.dropped })
+    }
+}
+
+/// Keeps the frames of the last `keep_ns` in `ring` (copies; the slot goes back).
+fn keep_last(ring: &mut VecDeque<Box<Slot>>, slot: &Slot, keep_ns: u64) {
+    let mut copy = match ring.front() {
+        Some(oldest) if slot.stamp_ns.saturating_sub(oldest.stamp_ns) > keep_ns => ring.pop_front(),
+        _ => None,
+    }
+    .unwrap_or_else(|| Slot::new(slot.depth.len(), slot.poses.capacity(), slot.camera));
+    copy.stamp_ns = slot.stamp_ns;
+    copy.camera = slot.camera;
+    copy.rgb.clone_from(&slot.rgb);
+    copy.depth.clone_from(&slot.depth);
+    copy.poses.clone_from(&slot.poses);
+    ring.push_back(copy);
+    while ring.front().is_some_and(|f| slot.stamp_ns.saturating_sub(f.stamp_ns) > keep_ns) {
+        ring.pop_front();
+    }
+}
+
+struct Output {
+    file: McapFile,
+    frames: FrameChannels,
+    poses: PoseChannels,
+    names: Vec<String>,
+    scratch: Vec<u8>,
+    written: u64,
+}
+
+impl Output {
+    fn write(&mut self, slot: &Slot) -> Result<()> {
+        let frame = RgbdFrame::new(slot.stamp_ns, slot.camera, &slot.rgb, &slot.depth)?;
+        self.frames.write_frame(&mut self.file, &frame, slot.stamp_ns, &mut self.scratch)?;
+        let records: Vec<ObjectPoseRecord<'_>> = slot
+            .poses
+            .iter()
+            .map(|p| ObjectPoseRecord {
+                object: p.object,
+                name: &self.names[p.object],
+                camera_from_object: p.camera_from_object,
+                covariance_ros: p.covariance_ros,
+            })
+            .collect();
+        self.poses.write(&mut self.file, slot.stamp_ns, &records)?;
+        self.written += 1;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_ring_keeps_the_last_seconds_and_reuses_buffers() {
+        let camera = CameraModel {
+            width: 2,
+            height: 1,
+            intrinsics: crate::geometry::PinholeIntrinsics { fx: 1.0, fy: 1.0, cx: 0.5, cy: 0.5 },
+            distortion: [0.0; 5],
+            depth_scale_m: 1e-3,
+        };
+        let mut ring = VecDeque::new();
+        let mut slot = Slot::new(2, 1, camera);
+        for second in 0..=10u64 {
+            slot.stamp_ns = second * 1_000_000_000;
+            slot.rgb.clear();
+            slot.rgb.extend([second as u8; 6]);
+            slot.depth.clear();
+            slot.depth.extend([second as u16; 2]);
+            keep_last(&mut ring, &slot, 3_000_000_000);
+        }
+        let kept: Vec<u64> = ring.iter().map(|s| s.stamp_ns / 1_000_000_000).collect();
+        assert_eq!(kept, [7, 8, 9, 10]);
+        assert!(ring.iter().all(|s| s.rgb[0] as u64 == s.stamp_ns / 1_000_000_000 && s.depth.len() == 2));
+    }
+}
