@@ -14,7 +14,7 @@ fn help_teaches_the_commands() {
     let out = mrsmap(&["--help"]);
     assert!(out.status.success());
     let text = String::from_utf8_lossy(&out.stdout);
-    for word in ["demo", "camera", "track", "poses", "odometry", "map", "model", "eval", "bench"] {
+    for word in ["demo", "camera", "track", "poses", "replay", "convert", "odometry", "map", "model", "eval", "bench"] {
         assert!(text.contains(word), "{text}");
     }
     let out = mrsmap(&["odometry", "--help"]);

@@ -53,17 +53,17 @@ struct PoseSnapshot {
 
 struct Slot {
     stamp_ns: u64,
-    camera: CameraModel,
+    camera: Option<CameraModel>,
     rgb: Vec<u8>,
     depth: Vec<u16>,
     poses: Vec<PoseSnapshot>,
 }
 
 impl Slot {
-    fn new(pixels: usize, objects: usize, camera: CameraModel) -> Box<Self> {
+    fn new(pixels: usize, objects: usize) -> Box<Self> {
         Box::new(Slot {
             stamp_ns: 0,
-            camera,
+            camera: None,
             rgb: Vec::with_capacity(3 * pixels),
             depth: Vec::with_capacity(pixels),
             poses: Vec::with_capacity(objects),
@@ -88,7 +88,7 @@ impl std::fmt::Debug for Recorder {
 impl Recorder {
     /// Creates the file and starts the writer thread; slots hold frames of up to
     /// `max_pixels` and the poses of `names`.
-    pub fn start(options: &RecordOptions, names: &[String], max_pixels: usize, camera: CameraModel) -> Result<Self> {
+    pub fn start(options: &RecordOptions, names: &[String], max_pixels: usize) -> Result<Self> {
         if options.last_seconds.is_some_and(|s| !(s.is_finite() && s > 0.0)) {
             return Err(anyhow!("--record-last must be a positive number of seconds"));
         }
@@ -101,7 +101,7 @@ impl Recorder {
         let (free_tx, free) = sync_channel(SLOTS);
         let (full, full_rx) = sync_channel::<Box<Slot>>(SLOTS);
         for _ in 0..SLOTS {
-            free_tx.send(Slot::new(max_pixels, names.len(), camera)).map_err(|_| anyhow!("recorder slots"))?;
+            free_tx.send(Slot::new(max_pixels, names.len())).map_err(|_| anyhow!("recorder slots"))?;
         }
         let names = names.to_vec();
         let (path, last_ns) = (options.path.clone(), options.last_seconds.map(|s| (s * 1e9) as u64));
@@ -142,7 +142,7 @@ impl Recorder {
             return;
         };
         slot.stamp_ns = frame.stamp_ns;
-        slot.camera = frame.camera;
+        slot.camera = Some(frame.camera);
         slot.rgb.clear();
         slot.rgb.extend_from_slice(frame.rgb);
         slot.depth.clear();
@@ -181,7 +181,7 @@ fn keep_last(ring: &mut VecDeque<Box<Slot>>, slot: &Slot, keep_ns: u64) {
         Some(oldest) if slot.stamp_ns.saturating_sub(oldest.stamp_ns) > keep_ns => ring.pop_front(),
         _ => None,
     }
-    .unwrap_or_else(|| Slot::new(slot.depth.len(), slot.poses.capacity(), slot.camera));
+    .unwrap_or_else(|| Slot::new(slot.depth.len(), slot.poses.capacity()));
     copy.stamp_ns = slot.stamp_ns;
     copy.camera = slot.camera;
     copy.rgb.clone_from(&slot.rgb);
@@ -204,7 +204,8 @@ struct Output {
 
 impl Output {
     fn write(&mut self, slot: &Slot) -> Result<()> {
-        let frame = RgbdFrame::new(slot.stamp_ns, slot.camera, &slot.rgb, &slot.depth)?;
+        let Some(camera) = slot.camera else { return Ok(()) };
+        let frame = RgbdFrame::new(slot.stamp_ns, camera, &slot.rgb, &slot.depth)?;
         self.frames.write_frame(&mut self.file, &frame, slot.stamp_ns, &mut self.scratch)?;
         let records: Vec<ObjectPoseRecord<'_>> = slot
             .poses
@@ -228,15 +229,8 @@ mod tests {
 
     #[test]
     fn the_ring_keeps_the_last_seconds_and_reuses_buffers() {
-        let camera = CameraModel {
-            width: 2,
-            height: 1,
-            intrinsics: crate::geometry::PinholeIntrinsics { fx: 1.0, fy: 1.0, cx: 0.5, cy: 0.5 },
-            distortion: [0.0; 5],
-            depth_scale_m: 1e-3,
-        };
         let mut ring = VecDeque::new();
-        let mut slot = Slot::new(2, 1, camera);
+        let mut slot = Slot::new(2, 1);
         for second in 0..=10u64 {
             slot.stamp_ns = second * 1_000_000_000;
             slot.rgb.clear();

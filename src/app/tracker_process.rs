@@ -192,15 +192,8 @@ impl<F: WireFrame> LiveTracker<F> {
 
     /// Records the frames and poses of the run into MCAP (see [`Recorder`]).
     pub fn record(&mut self, options: &RecordOptions) -> Result<()> {
-        let camera = crate::geometry::CameraModel {
-            width: F::WIDTH,
-            height: F::HEIGHT,
-            intrinsics: crate::geometry::PinholeIntrinsics { fx: 1.0, fy: 1.0, cx: 0.0, cy: 0.0 },
-            distortion: [0.0; 5],
-            depth_scale_m: 1e-3,
-        };
         let pixels = (F::WIDTH * F::HEIGHT) as usize;
-        self.core.recorder = Some(Recorder::start(options, &self.core.names, pixels, camera)?);
+        self.core.recorder = Some(Recorder::start(options, &self.core.names, pixels)?);
         log_line(format_args!("tracker: recording to {}", options.path.display()));
         Ok(())
     }

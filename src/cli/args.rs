@@ -386,6 +386,7 @@ pub enum ConvertCommand {
     ///
     /// Example:
     ///   mrsmap convert tum-to-mcap tests/data/fr3_teddy_8 --out teddy.mcap
+    #[command(verbatim_doc_comment)]
     TumToMcap(TumToMcapArgs),
 }
 

@@ -47,6 +47,7 @@ pub enum Command {
     /// Example (the teddy model the tracker uses):
     ///   mrsmap map --dataset ../shared/data/tum/fr3_teddy_first200 --camera robot_config/cameras/tum_fr3.toml \
     ///     --object robot_config/objects/teddy.toml --max-frames 100 --out models/teddy.mrsm --trajectory slam.txt
+    #[command(verbatim_doc_comment)]
     Map(MapArgs),
     /// Inspect model files: their description, or a picture of their surfels.
     #[command(subcommand)]
@@ -85,6 +86,7 @@ pub enum Command {
     /// Example:
     ///   mrsmap convert tum-to-mcap tests/data/fr3_teddy_8 --out teddy.mcap
     ///   mrsmap replay --input teddy.mcap --config robot_config/tracker.toml --out poses.mcap --trajectory traj.txt
+    #[command(verbatim_doc_comment)]
     Replay(ReplayArgs),
     /// Convert recordings (TUM RGB-D → MCAP).
     #[command(subcommand)]

@@ -1,0 +1,31 @@
+#!/usr/bin/env bash
+# Replay throughput, end to end (reading, decoding, tracking one object, writing poses):
+# fr3_teddy_first200 frames 100-199 as a VGA ROS 2 recording (16UC1 depth, zstd), replayed
+# three times at 2 and at 1 worker threads; also reading + decoding alone (--every with a
+# huge step decodes every frame and tracks only the first). Prints Markdown rows.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+DATA=${DATA:-../shared/data/tum/fr3_teddy_first200}
+cargo build --release --quiet
+OUT=$(mktemp -d)
+trap 'rm -rf "$OUT"' EXIT
+B=target/release/mrsmap
+$B convert tum-to-mcap "$DATA" --first-frame 100 --out "$OUT/rec.mcap" >/dev/null
+echo "| run | threads | frames/s end to end | tracking median ms | peak RSS MB |"
+echo "|---|---|---|---|---|"
+for threads in 2 1; do
+    sed -e "s/^# threads = 2 /threads = $threads #/" -e "s#\"\.\./models/#\"$PWD/models/#" \
+        robot_config/tracker.toml > "$OUT/tracker.toml"
+    for run in 1 2 3; do
+        /usr/bin/time -f "%M" -o "$OUT/rss" $B replay --input "$OUT/rec.mcap" --config "$OUT/tracker.toml" \
+            --out "$OUT/poses.mcap" --force > "$OUT/log"
+        fps=$(sed -n 's/.* s, \([0-9.]*\) frames\/s.*/\1/p' "$OUT/log")
+        med=$(sed -n 's/.*median \([0-9.]*\) ms.*/\1/p' "$OUT/log")
+        echo "| replay $run | $threads | $fps | $med | $(( $(cat "$OUT/rss") / 1024 )) |"
+    done
+done
+start=$(date +%s.%N)
+/usr/bin/time -f "%M" -o "$OUT/rss" $B replay --input "$OUT/rec.mcap" --config "$OUT/tracker.toml" --every 1000000 >/dev/null
+end=$(date +%s.%N)
+frames=$(python3 -c "print(len([l for l in open('$DATA/associations.txt') if l.strip() and not l.startswith('#')]) - 100)")
+echo "| read + decode only (process start and model load included) | - | $(python3 -c "print(round($frames / ($end - $start), 1))") | - | $(( $(cat "$OUT/rss") / 1024 )) |"
