@@ -109,7 +109,7 @@ impl Recorder {
             .name("mrsmap-recorder".into())
             .spawn(move || {
                 let mut out = Output { file, frames, poses, names, scratch: Vec::new(), written: 0 };
-                let mut ring: VecDeque<Box<Slot>> = VecDeque::new();
+                let mut ring = Ring::default();
                 for slot in full_rx {
                     match last_ns {
                         None => {
@@ -117,12 +117,12 @@ impl Recorder {
                             let _ = free_tx.send(slot);
                         }
                         Some(keep) => {
-                            keep_last(&mut ring, &slot, keep);
+                            ring.keep(&slot, keep);
                             let _ = free_tx.send(slot);
                         }
                     }
                 }
-                for slot in &ring {
+                for slot in &ring.frames {
                     out.write(slot)?;
                 }
                 let written = out.written;
@@ -175,21 +175,33 @@ impl Recorder {
     }
 }
 
-/// Keeps the frames of the last `keep_ns` in `ring` (copies; the slot goes back).
-fn keep_last(ring: &mut VecDeque<Box<Slot>>, slot: &Slot, keep_ns: u64) {
-    let mut copy = match ring.front() {
-        Some(oldest) if slot.stamp_ns.saturating_sub(oldest.stamp_ns) > keep_ns => ring.pop_front(),
-        _ => None,
-    }
-    .unwrap_or_else(|| Slot::new(slot.depth.len(), slot.poses.capacity()));
-    copy.stamp_ns = slot.stamp_ns;
-    copy.camera = slot.camera;
-    copy.rgb.clone_from(&slot.rgb);
-    copy.depth.clone_from(&slot.depth);
-    copy.poses.clone_from(&slot.poses);
-    ring.push_back(copy);
-    while ring.front().is_some_and(|f| slot.stamp_ns.saturating_sub(f.stamp_ns) > keep_ns) {
-        ring.pop_front();
+/// The frames of the last `keep_ns` (by stamp), copied out of the slots, with the
+/// buffers of dropped frames kept for reuse: in steady state nothing is allocated.
+#[derive(Default)]
+struct Ring {
+    frames: VecDeque<Box<Slot>>,
+    spare: Vec<Box<Slot>>,
+}
+
+impl Ring {
+    /// Adds a copy of `slot` and drops what is older than `keep_ns` before it; a stamp
+    /// that goes back (a restarted or looping driver) starts the window again.
+    fn keep(&mut self, slot: &Slot, keep_ns: u64) {
+        while let Some(front) = self.frames.front() {
+            if front.stamp_ns <= slot.stamp_ns && slot.stamp_ns - front.stamp_ns <= keep_ns {
+                break;
+            }
+            if let Some(old) = self.frames.pop_front() {
+                self.spare.push(old);
+            }
+        }
+        let mut copy = self.spare.pop().unwrap_or_else(|| Slot::new(slot.depth.len(), slot.poses.capacity()));
+        copy.stamp_ns = slot.stamp_ns;
+        copy.camera = slot.camera;
+        copy.rgb.clone_from(&slot.rgb);
+        copy.depth.clone_from(&slot.depth);
+        copy.poses.clone_from(&slot.poses);
+        self.frames.push_back(copy);
     }
 }
 
@@ -229,18 +241,26 @@ mod tests {
 
     #[test]
     fn the_ring_keeps_the_last_seconds_and_reuses_buffers() {
-        let mut ring = VecDeque::new();
+        let mut ring = Ring::default();
         let mut slot = Slot::new(2, 1);
-        for second in 0..=10u64 {
+        let mut add = |second: u64, ring: &mut Ring| {
             slot.stamp_ns = second * 1_000_000_000;
             slot.rgb.clear();
             slot.rgb.extend([second as u8; 6]);
             slot.depth.clear();
             slot.depth.extend([second as u16; 2]);
-            keep_last(&mut ring, &slot, 3_000_000_000);
+            ring.keep(&slot, 3_000_000_000);
+        };
+        for second in 0..=10 {
+            add(second, &mut ring);
         }
-        let kept: Vec<u64> = ring.iter().map(|s| s.stamp_ns / 1_000_000_000).collect();
-        assert_eq!(kept, [7, 8, 9, 10]);
-        assert!(ring.iter().all(|s| s.rgb[0] as u64 == s.stamp_ns / 1_000_000_000 && s.depth.len() == 2));
+        let kept = |ring: &Ring| ring.frames.iter().map(|s| s.stamp_ns / 1_000_000_000).collect::<Vec<_>>();
+        assert_eq!(kept(&ring), [7, 8, 9, 10]);
+        assert!(ring.frames.iter().all(|s| u64::from(s.rgb[0]) == s.stamp_ns / 1_000_000_000 && s.depth.len() == 2));
+        assert_eq!(ring.frames.len() + ring.spare.len(), 4, "buffers are reused");
+        // The clock goes back (a restarted driver): the window starts again.
+        add(2, &mut ring);
+        assert_eq!(kept(&ring), [2]);
+        assert_eq!(ring.frames.len() + ring.spare.len(), 4);
     }
 }
