@@ -179,8 +179,8 @@ impl Recorder {
 /// buffers of dropped frames kept for reuse: in steady state nothing is allocated.
 #[derive(Default)]
 struct Ring {
-    frames: VecDeque<Box<Slot>>,
-    spare: Vec<Box<Slot>>,
+    frames: VecDeque<Slot>,
+    spare: Vec<Slot>,
 }
 
 impl Ring {
@@ -195,7 +195,7 @@ impl Ring {
                 self.spare.push(old);
             }
         }
-        let mut copy = self.spare.pop().unwrap_or_else(|| Slot::new(slot.depth.len(), slot.poses.capacity()));
+        let mut copy = self.spare.pop().unwrap_or_else(|| *Slot::new(slot.depth.len(), slot.poses.capacity()));
         copy.stamp_ns = slot.stamp_ns;
         copy.camera = slot.camera;
         copy.rgb.clone_from(&slot.rgb);
