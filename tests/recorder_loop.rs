@@ -12,7 +12,6 @@ use mrsmap::app::tracker_process::{LiveTracker, RunLimits, StopReason};
 use mrsmap::io::recording::{RecordingReader, RecordingTopics};
 use mrsmap::io::tracker_config::read_tracker_config;
 use mrsmap::io::wire::RgbdFrameVga;
-use std::process::{Command, Stdio};
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 
@@ -31,17 +30,7 @@ fn the_live_loop_with_a_ring_recording_allocates_nothing_per_frame() {
     let path = dir.join("ring.mcap");
     // The clip spans 0.23 s and loops (its stamps jump back): a 0.1 s window.
     tracker.record(&RecordOptions { path: path.clone(), last_seconds: Some(0.1) }).expect("recording starts");
-    let camera = Command::new(mrsmap_bin())
-        .args(["camera", "--dataset"])
-        .arg(teddy_clip())
-        .arg("--camera")
-        .arg(fr3_camera_file())
-        .args(["--service", &config.camera_service, "--loop", "--rate", "100"])
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("camera driver starts");
-    let _camera = ChildGuard(camera);
+    let _camera = start_looping_driver(&config.camera_service, "100");
     let limits = RunLimits { max_frames: Some(WARM_UP + COUNTED), idle_timeout: Some(Duration::from_secs(30)) };
     let summary = tracker
         .run(&limits, &mut |event| {

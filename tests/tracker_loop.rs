@@ -9,7 +9,6 @@ use common::*;
 use mrsmap::app::tracker_process::{LiveTracker, RunLimits, StopReason};
 use mrsmap::io::tracker_config::read_tracker_config;
 use mrsmap::io::wire::RgbdFrameVga;
-use std::process::{Command, Stdio};
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 
@@ -25,17 +24,7 @@ fn the_live_loop_allocates_nothing_per_frame() {
     let config_path = write_tracker_config(&dir, "loop", "");
     let config = read_tracker_config(&config_path).expect("config");
     let mut tracker = LiveTracker::<RgbdFrameVga>::start(&config).expect("tracker starts");
-    let camera = Command::new(mrsmap_bin())
-        .args(["camera", "--dataset"])
-        .arg(teddy_clip())
-        .arg("--camera")
-        .arg(fr3_camera_file())
-        .args(["--service", &config.camera_service, "--loop", "--rate", "300"])
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("camera driver starts");
-    let _camera = ChildGuard(camera);
+    let _camera = start_looping_driver(&config.camera_service, "300");
     let mut counted_frames = 0;
     let mut tracking = 0;
     let limits = RunLimits { max_frames: Some(WARM_UP + COUNTED), idle_timeout: Some(Duration::from_secs(30)) };

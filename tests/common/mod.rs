@@ -132,3 +132,18 @@ impl Drop for ChildGuard {
         let _ = self.0.wait();
     }
 }
+
+/// Starts `mrsmap camera` looping the shipped clip at `rate` Hz on `service`.
+pub fn start_looping_driver(service: &str, rate: &str) -> ChildGuard {
+    let camera = std::process::Command::new(mrsmap_bin())
+        .args(["camera", "--dataset"])
+        .arg(teddy_clip())
+        .arg("--camera")
+        .arg(fr3_camera_file())
+        .args(["--service", service, "--loop", "--rate", rate])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("camera driver starts");
+    ChildGuard(camera)
+}
