@@ -318,3 +318,24 @@ fn a_recording_written_by_mrsmap_reads_back() {
     assert_eq!((back.stamp_ns, back.rgb, back.depth), (frame.stamp_ns, frame.rgb, frame.depth));
     assert_eq!(back.camera, frame.camera);
 }
+
+#[test]
+fn a_corrupt_chunk_in_an_indexed_recording_stops_the_replay_there() {
+    let dir = temp_dir("mcap-corrupt");
+    let recording = convert_clip(&dir, DepthEncoding::Mm16);
+    let mut bytes = std::fs::read(&recording).expect("read");
+    // Overwrite a stretch in the middle of the data section; the summary stays intact.
+    let middle = bytes.len() / 2;
+    bytes[middle..middle + 4096].fill(0xA5);
+    let bad = dir.join("bad.mcap");
+    std::fs::write(&bad, &bytes).expect("write");
+    let mut reader = RecordingReader::open(&bad, RecordingTopics::default(), None).expect("opens");
+    assert_eq!(reader.mode(), ReadMode::Indexed);
+    let mut frames = 0;
+    while reader.next_frame().expect("frames before the damage decode").is_some() {
+        frames += 1;
+    }
+    assert!(frames < 8, "{frames} frames");
+    let damage = reader.damage().expect("damage reported");
+    println!("{frames} frames, then {damage:?}");
+}
