@@ -11,6 +11,7 @@ pub mod model_cmd;
 pub mod odometry;
 pub mod poses_client;
 pub mod quality_eval;
+pub mod read_ahead;
 pub mod recorder;
 pub mod render;
 pub mod replay;

@@ -3,6 +3,7 @@
 
 use super::dataset::thread_pool;
 use super::poses_client::with_suffix;
+use super::read_ahead::ReadAhead;
 use super::report::{percentile, progress_bar};
 use super::tracking::{StepOutput, load_tracker, track_frame};
 use crate::geometry::{CameraModel, Pose};
@@ -69,7 +70,7 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
         }
     }
     let started = Instant::now();
-    let mut reader = RecordingReader::open(&job.input, job.topics.clone(), job.camera)?;
+    let reader = RecordingReader::open(&job.input, job.topics.clone(), job.camera)?;
     let pool = thread_pool(config.threads)?;
     let names: Vec<String> = config.objects.iter().map(|o| o.name.clone()).collect();
     // Written next to the target and renamed when finished, also after an error, so
@@ -93,8 +94,10 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
         frames: 0,
     };
     let bar = progress_bar(reader.depth_count().unwrap_or(0), "replaying");
-    let result = state.replay(config, job, &mut reader, &pool, &names, output.as_mut(), &bar);
+    let mut frames = ReadAhead::start(reader).context("starting the reader thread")?;
+    let result = state.replay(config, job, &mut frames, &pool, &names, output.as_mut(), &bar);
     bar.finish_and_clear();
+    let reader = frames.finish().context("the reader thread failed")?;
     if let (Some((file, _)), Some(partial), Some(out)) = (output, &partial, &job.out) {
         file.finish().with_context(|| format!("finishing {}", partial.display()))?;
         std::fs::rename(partial, out).with_context(|| format!("renaming to {}", out.display()))?;
@@ -135,7 +138,7 @@ impl Replay {
         &mut self,
         config: &TrackerConfig,
         job: &ReplayJob,
-        reader: &mut RecordingReader,
+        frames: &mut ReadAhead,
         pool: &rayon::ThreadPool,
         names: &[String],
         mut output: Option<&mut (McapFile, PoseChannels)>,
@@ -143,15 +146,18 @@ impl Replay {
     ) -> Result<()> {
         let mut index = 0usize;
         let mut records = Vec::with_capacity(names.len());
-        while let Some(frame) = reader.next_frame()? {
+        while let Some(owned) = frames.next_frame() {
+            let owned = owned?;
             bar.inc(1);
             index += 1;
             if !(index - 1).is_multiple_of(job.every) {
+                frames.give_back(owned);
                 continue;
             }
             if job.max_frames.is_some_and(|m| self.frames >= m) {
                 break;
             }
+            let Some(frame) = owned.frame() else { continue };
             let tracker = match &mut self.tracker {
                 Some(t) => t,
                 // Sized by the first frame: the recording's resolution.
@@ -179,6 +185,7 @@ impl Replay {
             if let Some((file, channels)) = output.as_deref_mut() {
                 channels.write(file, frame.stamp_ns, &records)?;
             }
+            frames.give_back(owned);
         }
         Ok(())
     }

@@ -1,0 +1,93 @@
+//! Reading a recording one frame ahead on its own thread, so that decompression and
+//! decoding overlap the tracker step. Frames arrive in file order (the output does not
+//! depend on the timing); their buffers are handed back and reused.
+
+use crate::frame::RgbdFrame;
+use crate::geometry::CameraModel;
+use crate::io::recording::{RecordingError, RecordingReader};
+use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
+use std::thread::JoinHandle;
+
+/// A decoded frame that owns its pixels.
+#[derive(Debug, Default)]
+pub struct OwnedFrame {
+    /// Stamp (ns).
+    pub stamp_ns: u64,
+    /// Camera.
+    pub camera: Option<CameraModel>,
+    /// rgb8.
+    pub rgb: Vec<u8>,
+    /// Depth.
+    pub depth: Vec<u16>,
+}
+
+impl OwnedFrame {
+    /// The frame view.
+    pub fn frame(&self) -> Option<RgbdFrame<'_>> {
+        RgbdFrame::new(self.stamp_ns, self.camera?, &self.rgb, &self.depth).ok()
+    }
+}
+
+/// Frames read ahead by a separate thread.
+pub struct ReadAhead {
+    frames: Option<Receiver<Result<OwnedFrame, RecordingError>>>,
+    recycle: SyncSender<OwnedFrame>,
+    thread: Option<JoinHandle<RecordingReader>>,
+}
+
+impl std::fmt::Debug for ReadAhead {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ReadAhead").finish_non_exhaustive()
+    }
+}
+
+/// Frames decoded but not yet taken.
+const AHEAD: usize = 2;
+
+impl ReadAhead {
+    /// Starts reading `reader` on a new thread.
+    pub fn start(mut reader: RecordingReader) -> std::io::Result<Self> {
+        let (tx, frames) = sync_channel(AHEAD);
+        let (recycle, recycled) = sync_channel::<OwnedFrame>(AHEAD + 2);
+        let thread = std::thread::Builder::new().name("mrsmap-read-ahead".into()).spawn(move || {
+            loop {
+                let mut owned = recycled.try_recv().unwrap_or_default();
+                let next = match reader.next_frame() {
+                    Ok(Some(f)) => {
+                        owned.stamp_ns = f.stamp_ns;
+                        owned.camera = Some(f.camera);
+                        owned.rgb.clear();
+                        owned.rgb.extend_from_slice(f.rgb);
+                        owned.depth.clear();
+                        owned.depth.extend_from_slice(f.depth);
+                        Ok(owned)
+                    }
+                    Ok(None) => break,
+                    Err(e) => Err(e),
+                };
+                let stop = next.is_err();
+                if tx.send(next).is_err() || stop {
+                    break;
+                }
+            }
+            reader
+        })?;
+        Ok(ReadAhead { frames: Some(frames), recycle, thread: Some(thread) })
+    }
+
+    /// The next frame; `None` at the end (or damage: see the reader after [`Self::finish`]).
+    pub fn next_frame(&mut self) -> Option<Result<OwnedFrame, RecordingError>> {
+        self.frames.as_ref()?.recv().ok()
+    }
+
+    /// Hands a frame's buffers back for reuse.
+    pub fn give_back(&self, frame: OwnedFrame) {
+        let _ = self.recycle.try_send(frame);
+    }
+
+    /// Stops reading and returns the reader (its statistics and damage).
+    pub fn finish(mut self) -> Option<RecordingReader> {
+        self.frames = None;
+        self.thread.take().and_then(|t| t.join().ok())
+    }
+}
