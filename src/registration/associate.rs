@@ -187,7 +187,7 @@ fn associate_node(
         transformed,
         res,
         best: radius * radius,
-        second: radius * radius,
+        second: f64::INFINITY,
         found: Association::NONE,
     };
     let cube = fresh || previous.model_node == NONE;
@@ -211,9 +211,18 @@ fn associate_node(
     // The next search would run over the same candidates only if this one did: a cube
     // query that found nothing (the next is a cube query too), or a neighbourhood search
     // that kept its match (the next searches the same neighbourhood).
+    // It stays valid while no transformed mean moves so far that another candidate could
+    // overtake the match (half their gap), the match leave the search radius, or — with
+    // no match — a candidate come within the radius.
     let same_candidates = if cube { !result.is_matched() } else { result.model_node == previous.model_node };
-    result.valid_radius =
-        if !fresh && same_candidates { (0.5 * (search.second.sqrt() - search.best.sqrt())) as f32 } else { -1.0 };
+    let radius2 = radius * radius;
+    result.valid_radius = if !same_candidates {
+        -1.0
+    } else if result.is_matched() {
+        (0.5 * (search.second.min(radius2).sqrt() - search.best.sqrt())) as f32
+    } else {
+        (search.second.sqrt() - radius) as f32
+    };
     *a = result;
 }
 
@@ -266,8 +275,8 @@ struct Search<'a> {
     res: f64,
     /// Squared distance of the best match so far (initially the search radius²).
     best: f64,
-    /// Lower bound of the squared distance of any other candidate that passes the
-    /// pose-independent gates (initially the search radius²: "no match").
+    /// Lower bound of the squared distance of any other candidate in the searched cells
+    /// that passes the pose-independent gates (initially infinite: none).
     second: f64,
     found: Association,
 }
@@ -344,35 +353,44 @@ impl Search<'_> {
     /// that the best match is found early — skipping cells that cannot beat the best
     /// match before reading them.
     ///
-    /// Nodes are found through the parent cell containing the centre: the cube spans at
-    /// most three parent cells per axis, all in that parent's 27-neighbourhood.
+    /// Nodes are found through their parents: the cube spans at most three parent cells
+    /// per axis, all in the 27-neighbourhood of the parent containing the centre; an
+    /// absent parent rules out its eight cells with one read.
     fn cube(&mut self, center: &Vector3<f64>, radius: f64, level: usize) {
         let model = self.input.terms.model;
         let lo = model.key_of(&(center - Vector3::repeat(radius)), level);
         let hi = model.key_of(&(center + Vector3::repeat(radius)), level);
         let k0 = model.key_of(center, level);
-        let top = level + 1 >= model.num_levels();
-        let parent = if top { None } else { model.find(level + 1, [k0[0] >> 1, k0[1] >> 1, k0[2] >> 1]) };
-        let lookup = |k: [i32; 3]| -> Option<u32> {
-            match parent {
-                Some(p0) => {
-                    let d = |i: usize| (k[i] >> 1) - (k0[i] >> 1);
-                    let pn = model.neighbors(p0)[neighbor_index(d(0), d(1), d(2))];
-                    if pn == NONE {
-                        return None;
+        if level + 1 >= model.num_levels() {
+            // The top level has no parents: look each cell up.
+            for x in lo[0]..=hi[0] {
+                for y in lo[1]..=hi[1] {
+                    for z in lo[2]..=hi[2] {
+                        if let Some(m) = model.find(level, [x, y, z]) {
+                            self.visit(m, [x, y, z]);
+                        }
                     }
-                    let c = model.nodes()[pn as usize].children[octant(k)];
-                    (c != NONE).then_some(c)
-                }
-                None if top => model.find(level, k),
-                None => {
-                    let pn = model.find(level + 1, [k[0] >> 1, k[1] >> 1, k[2] >> 1])?;
-                    let c = model.nodes()[pn as usize].children[octant(k)];
-                    (c != NONE).then_some(c)
                 }
             }
+            return;
+        }
+        let p0_key = [k0[0] >> 1, k0[1] >> 1, k0[2] >> 1];
+        let p0 = model.find(level + 1, p0_key);
+        let parent = |pk: [i32; 3]| -> Option<u32> {
+            match p0 {
+                Some(p0) => {
+                    let d = |i: usize| pk[i] - p0_key[i];
+                    let pn = model.neighbors(p0)[neighbor_index(d(0), d(1), d(2))];
+                    (pn != NONE).then_some(pn)
+                }
+                None => model.find(level + 1, pk),
+            }
         };
-        if let Some(m) = lookup(k0) {
+        let child = |pn: u32, k: [i32; 3]| {
+            let c = model.nodes()[pn as usize].children[octant(k)];
+            (c != NONE).then_some(c)
+        };
+        if let Some(m) = p0.and_then(|p| child(p, k0)) {
             self.visit(m, k0);
         }
         // Per axis, the smallest squared distance of any transformed mean to each cell
@@ -387,29 +405,23 @@ impl Search<'_> {
                 }
             }
         }
-        for (a, &dx) in slab[0].iter().enumerate().take((hi[0] - lo[0] + 1) as usize) {
-            if dx >= self.best {
-                self.second = self.second.min(dx);
-                continue;
-            }
-            for (b, &dy) in slab[1].iter().enumerate().take((hi[1] - lo[1] + 1) as usize) {
-                let dxy = dx + dy;
-                if dxy >= self.best {
-                    self.second = self.second.min(dxy);
-                    continue;
-                }
-                for (c, &dz) in slab[2].iter().enumerate().take((hi[2] - lo[2] + 1) as usize) {
-                    let k = [lo[0] + a as i32, lo[1] + b as i32, lo[2] + c as i32];
-                    let d = dxy + dz;
-                    if d >= self.best {
-                        // No memory read: a lower bound for the cache is all we need.
-                        self.second = self.second.min(d);
-                        continue;
-                    }
-                    if k != k0
-                        && let Some(m) = lookup(k)
-                    {
-                        self.visit(m, k);
+        for px in lo[0] >> 1..=hi[0] >> 1 {
+            for py in lo[1] >> 1..=hi[1] >> 1 {
+                for pz in lo[2] >> 1..=hi[2] >> 1 {
+                    let Some(pn) = parent([px, py, pz]) else { continue };
+                    let children = &model.nodes()[pn as usize].children;
+                    for (o, &c) in children.iter().enumerate() {
+                        let k = [2 * px + (o >> 2) as i32, 2 * py + ((o >> 1) & 1) as i32, 2 * pz + (o & 1) as i32];
+                        if c == NONE || k == k0 || (0..3).any(|i| k[i] < lo[i] || k[i] > hi[i]) {
+                            continue;
+                        }
+                        let d: f64 = (0..3).map(|i| slab[i][(k[i] - lo[i]) as usize]).sum();
+                        if d >= self.best {
+                            // No read of the node: a lower bound for the cache is all we need.
+                            self.second = self.second.min(d);
+                            continue;
+                        }
+                        self.visit(c, k);
                     }
                 }
             }
