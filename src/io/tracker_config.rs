@@ -21,6 +21,7 @@
 //! lm_max_iterations = 10
 //! newton_iterations = 2
 //! coarsest_level = 4
+//! step_tolerance = 0.002
 //!
 //! [[object]]
 //! name = "teddy"
@@ -138,6 +139,7 @@ struct RawTracker {
     lm_max_iterations: Option<usize>,
     newton_iterations: Option<usize>,
     coarsest_level: Option<usize>,
+    step_tolerance: Option<f64>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -175,6 +177,10 @@ pub fn parse_tracker_config(text: &str, origin: &Path) -> Result<TrackerConfig, 
     params.registration.lm_max_iterations = t.lm_max_iterations.unwrap_or(params.registration.lm_max_iterations);
     params.registration.newton_iterations = t.newton_iterations.unwrap_or(params.registration.newton_iterations);
     params.registration.coarsest_level = t.coarsest_level.unwrap_or(params.registration.coarsest_level);
+    if let Some(tol) = t.step_tolerance {
+        params.registration.step_tolerance_m = tol;
+        params.registration.step_tolerance_rad = tol;
+    }
     params.validate().map_err(|e| invalid(e.to_string()))?;
     params.map.validate().map_err(|e| invalid(e.to_string()))?;
     if t.threads == Some(0) {

@@ -135,6 +135,13 @@ impl RegistrationParams {
         if self.max_rotation_std_rad.is_nan() || self.max_rotation_std_rad <= 0.0 {
             return err("max_rotation_std_rad", self.max_rotation_std_rad, "> 0");
         }
+        for (name, value) in
+            [("step_tolerance_m", self.step_tolerance_m), ("step_tolerance_rad", self.step_tolerance_rad)]
+        {
+            if !(value > 0.0 && value.is_finite()) {
+                return err(name, value, "> 0");
+            }
+        }
         if self.min_associations < 6 {
             return err("min_associations", self.min_associations as f64, ">= 6");
         }
