@@ -52,7 +52,8 @@ pub enum Command {
     /// Inspect model files: their description, or a picture of their surfels.
     #[command(subcommand)]
     Model(ModelCommand),
-    /// Camera driver: publishes a TUM RGB-D sequence over iceoryx2 shared memory.
+    /// Camera driver: publishes a TUM RGB-D sequence (--dataset) or an MCAP recording
+    /// (--mcap) over iceoryx2 shared memory.
     ///
     /// Frames go to the service `<SERVICE>/rgbd/vga` (or `/qvga` with --qvga), written
     /// straight into loaned samples; an event of the same name wakes subscribers. Stop
