@@ -44,12 +44,13 @@ impl GateVolume {
 #[inline]
 fn point_in_polygon(polygon: &[[f32; 2]], x: f32, y: f32) -> bool {
     let mut inside = false;
-    let n = polygon.len();
-    for i in 0..n {
-        let (a, b) = (polygon[i], polygon[(i + n - 1) % n]);
+    let Some(&last) = polygon.last() else { return false };
+    let mut b = last;
+    for &a in polygon {
         if (a[1] > y) != (b[1] > y) && x < (b[0] - a[0]) * (y - a[1]) / (b[1] - a[1]) + a[0] {
             inside = !inside;
         }
+        b = a;
     }
     inside
 }
