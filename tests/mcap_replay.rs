@@ -100,6 +100,7 @@ fn replay_job(input: &Path, out: Option<PathBuf>, trajectory: Option<PathBuf>) -
         topics: RecordingTopics::default(),
         camera: None,
         every: 1,
+        qvga: false,
         max_frames: None,
     }
 }
@@ -128,7 +129,27 @@ fn replay_matches_the_dataset_run_and_is_byte_identical_at_any_thread_count() {
     assert!(outputs[0].0 == outputs[1].0, "the pose files differ between 1 and 2 threads");
     // 32FC1 keeps TUM's depth units exactly: the same poses as tracking the dataset.
     let config = config_with_threads(&dir, 2);
-    let job = mrsmap::app::track_dataset::TrackDatasetJob {
+    mrsmap::app::track_dataset::run(&config, &job_template(&dir)).expect("tracks the dataset");
+    let body = |t: &str| t.lines().filter(|l| !l.starts_with('#')).map(str::to_string).collect::<Vec<_>>();
+    let from_dataset = std::fs::read_to_string(dir.join("dataset.txt")).expect("trajectory");
+    assert_eq!(body(&outputs[0].1), body(&from_dataset));
+    assert_eq!(body(&from_dataset).len(), 8);
+    // At QVGA (halved on read) too.
+    let qvga_traj = dir.join("qvga.txt");
+    let job = ReplayJob { qvga: true, ..replay_job(&recording, None, Some(qvga_traj.clone())) };
+    assert_eq!(replay(&config, &job).expect("replays at QVGA").objects[0].1[0], 8);
+    let dataset_job = mrsmap::app::track_dataset::TrackDatasetJob {
+        qvga: true,
+        trajectory: Some(dir.join("dataset_qvga.txt")),
+        ..job_template(&dir)
+    };
+    mrsmap::app::track_dataset::run(&config, &dataset_job).expect("tracks the dataset at QVGA");
+    let read = |p: PathBuf| body(&std::fs::read_to_string(p).expect("trajectory"));
+    assert_eq!(read(qvga_traj), read(dir.join("dataset_qvga.txt")));
+}
+
+fn job_template(dir: &Path) -> mrsmap::app::track_dataset::TrackDatasetJob {
+    mrsmap::app::track_dataset::TrackDatasetJob {
         dataset: teddy_clip(),
         camera: fr3_camera_file(),
         first_frame: 0,
@@ -136,12 +157,7 @@ fn replay_matches_the_dataset_run_and_is_byte_identical_at_any_thread_count() {
         qvga: false,
         start_at_ground_truth: false,
         trajectory: Some(dir.join("dataset.txt")),
-    };
-    mrsmap::app::track_dataset::run(&config, &job).expect("tracks the dataset");
-    let body = |t: &str| t.lines().filter(|l| !l.starts_with('#')).map(str::to_string).collect::<Vec<_>>();
-    let from_dataset = std::fs::read_to_string(dir.join("dataset.txt")).expect("trajectory");
-    assert_eq!(body(&outputs[0].1), body(&from_dataset));
-    assert_eq!(body(&from_dataset).len(), 8);
+    }
 }
 
 /// Writes a recording of `frames` synthetic frames with a custom depth message.

@@ -4,6 +4,7 @@
 
 use crate::frame::RgbdFrame;
 use crate::geometry::CameraModel;
+use crate::io::frames::halve;
 use crate::io::recording::{RecordingError, RecordingReader};
 use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 use std::thread::JoinHandle;
@@ -45,14 +46,20 @@ impl std::fmt::Debug for ReadAhead {
 const AHEAD: usize = 2;
 
 impl ReadAhead {
-    /// Starts reading `reader` on a new thread.
-    pub fn start(mut reader: RecordingReader) -> std::io::Result<Self> {
+    /// Starts reading `reader` on a new thread; with `half`, frames are subsampled by two
+    /// (QVGA from VGA), as `--qvga` does for datasets.
+    pub fn start(mut reader: RecordingReader, half: bool) -> std::io::Result<Self> {
         let (tx, frames) = sync_channel(AHEAD);
         let (recycle, recycled) = sync_channel::<OwnedFrame>(AHEAD + 2);
         let thread = std::thread::Builder::new().name("mrsmap-read-ahead".into()).spawn(move || {
             loop {
                 let mut owned = recycled.try_recv().unwrap_or_default();
                 let next = match reader.next_frame() {
+                    Ok(Some(f)) if half => {
+                        owned.stamp_ns = f.stamp_ns;
+                        owned.camera = halve(&f, &mut owned.rgb, &mut owned.depth).ok().map(|h| h.camera);
+                        Ok(owned)
+                    }
                     Ok(Some(f)) => {
                         owned.stamp_ns = f.stamp_ns;
                         owned.camera = Some(f.camera);

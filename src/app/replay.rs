@@ -34,6 +34,8 @@ pub struct ReplayJob {
     pub camera: Option<CameraModel>,
     /// Track every n-th frame only (1: all).
     pub every: usize,
+    /// Halve images and intrinsics (QVGA from VGA).
+    pub qvga: bool,
     /// Stop after this many frames.
     pub max_frames: Option<usize>,
 }
@@ -94,7 +96,7 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
         frames: 0,
     };
     let bar = progress_bar(reader.depth_count().unwrap_or(0), "replaying");
-    let mut frames = ReadAhead::start(reader).context("starting the reader thread")?;
+    let mut frames = ReadAhead::start(reader, job.qvga).context("starting the reader thread")?;
     let result = state.replay(config, job, &mut frames, &pool, &names, output.as_mut(), &bar);
     bar.finish_and_clear();
     let reader = frames.finish().context("the reader thread failed")?;
@@ -157,7 +159,10 @@ impl Replay {
             if job.max_frames.is_some_and(|m| self.frames >= m) {
                 break;
             }
-            let Some(frame) = owned.frame() else { continue };
+            let Some(frame) = owned.frame() else {
+                frames.give_back(owned);
+                continue;
+            };
             let tracker = match &mut self.tracker {
                 Some(t) => t,
                 // Sized by the first frame: the recording's resolution.

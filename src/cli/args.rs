@@ -373,6 +373,9 @@ pub struct ReplayArgs {
     /// Track only every n-th frame (the default 1 tracks every frame; none is dropped).
     #[arg(long, default_value_t = 1)]
     pub every: usize,
+    /// Halve images and intrinsics (track at QVGA from a VGA recording).
+    #[arg(long)]
+    pub qvga: bool,
     /// Stop after this many tracked frames.
     #[arg(long)]
     pub max_frames: Option<usize>,

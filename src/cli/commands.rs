@@ -265,6 +265,7 @@ pub fn replay(a: ReplayArgs) -> Result<()> {
         topics: a.topics.topics(),
         camera,
         every: a.every,
+        qvga: a.qvga,
         max_frames: a.max_frames,
     };
     let summary = app::replay::run(&config, &job)?;
