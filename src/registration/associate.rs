@@ -177,7 +177,7 @@ fn associate_node(
     let res = model.resolution(level);
     let radius = input.params.search_radius_cells * res;
     let center = scene.node_center(node);
-    if !fresh && cache_holds(input, passes, &previous, transformed, &center, radius, level) {
+    if repeats_search(&previous, fresh) && cache_holds(input, passes, &previous, transformed, &center, radius, level) {
         *a = previous;
         return;
     }
@@ -208,15 +208,15 @@ fn associate_node(
     let mut result = search.found;
     result.pass = pass as u16;
     result.cube = cube;
-    // The next search would run over the same candidates only if this one did: a cube
-    // query that found nothing (the next is a cube query too), or a neighbourhood search
-    // that kept its match (the next searches the same neighbourhood).
-    // It stays valid while no transformed mean moves so far that another candidate could
-    // overtake the match (half their gap), the match leave the search radius, or — with
-    // no match — a candidate come within the radius.
-    let same_candidates = if cube { !result.is_matched() } else { result.model_node == previous.model_node };
+    // The result can be reused by a later search over the same candidates (see
+    // `repeats_search`): any cube query (its cube is checked at reuse), or a neighbourhood
+    // search that kept its match (the next searches the same neighbourhood). It stays
+    // valid while no transformed mean moves so far that another candidate could overtake
+    // the match (half their gap), the match leave the search radius, or — with no match
+    // — a candidate come within the radius.
+    let reusable = cube || result.model_node == previous.model_node;
     let radius2 = radius * radius;
-    result.valid_radius = if !same_candidates {
+    result.valid_radius = if !reusable {
         -1.0
     } else if result.is_matched() {
         (0.5 * (search.second.min(radius2).sqrt() - search.best.sqrt())) as f32
@@ -224,6 +224,13 @@ fn associate_node(
         (search.second.sqrt() - radius) as f32
     };
     *a = result;
+}
+
+/// Whether the search at this pass would run over the candidates of the one that gave
+/// `previous`: a fresh pass searches a cube; otherwise a node without a match searches a
+/// cube and a node with one the neighbourhood of its match.
+fn repeats_search(previous: &Association, fresh: bool) -> bool {
+    if fresh { previous.cube } else { !previous.cube || !previous.is_matched() }
 }
 
 /// Whether the previous search result of a node still holds at the current pose: the
