@@ -186,6 +186,7 @@ fn associate_node(
         node,
         transformed,
         res,
+        radius2: radius * radius,
         best: radius * radius,
         second: f64::INFINITY,
         found: Association::NONE,
@@ -280,6 +281,8 @@ struct Search<'a> {
     node: &'a Node,
     transformed: &'a [Transformed],
     res: f64,
+    /// The squared search radius.
+    radius2: f64,
     /// Squared distance of the best match so far (initially the search radius²).
     best: f64,
     /// Lower bound of the squared distance of any other candidate in the searched cells
@@ -325,6 +328,12 @@ impl Search<'_> {
             if dist2 >= self.second {
                 continue;
             }
+            if dist2 >= self.radius2 {
+                // Beyond the search radius: only a bound for the cache (without the gates,
+                // a smaller and so safe one).
+                self.second = dist2;
+                continue;
+            }
             if p.use_color {
                 let dc = msf.color - sf.color;
                 if dc.x.abs() > p.luminance_gate || dc.y.abs() > p.chroma_gate || dc.z.abs() > p.chroma_gate {
@@ -360,44 +369,35 @@ impl Search<'_> {
     /// that the best match is found early — skipping cells that cannot beat the best
     /// match before reading them.
     ///
-    /// Nodes are found through their parents: the cube spans at most three parent cells
-    /// per axis, all in the 27-neighbourhood of the parent containing the centre; an
-    /// absent parent rules out its eight cells with one read.
+    /// Nodes are found through the parent cell containing the centre: the cube spans at
+    /// most three parent cells per axis, all in that parent's 27-neighbourhood.
     fn cube(&mut self, center: &Vector3<f64>, radius: f64, level: usize) {
         let model = self.input.terms.model;
         let lo = model.key_of(&(center - Vector3::repeat(radius)), level);
         let hi = model.key_of(&(center + Vector3::repeat(radius)), level);
         let k0 = model.key_of(center, level);
-        if level + 1 >= model.num_levels() {
-            // The top level has no parents: look each cell up.
-            for x in lo[0]..=hi[0] {
-                for y in lo[1]..=hi[1] {
-                    for z in lo[2]..=hi[2] {
-                        if let Some(m) = model.find(level, [x, y, z]) {
-                            self.visit(m, [x, y, z]);
-                        }
-                    }
-                }
-            }
-            return;
-        }
-        let p0_key = [k0[0] >> 1, k0[1] >> 1, k0[2] >> 1];
-        let p0 = model.find(level + 1, p0_key);
-        let parent = |pk: [i32; 3]| -> Option<u32> {
-            match p0 {
+        let top = level + 1 >= model.num_levels();
+        let parent = if top { None } else { model.find(level + 1, [k0[0] >> 1, k0[1] >> 1, k0[2] >> 1]) };
+        let lookup = |k: [i32; 3]| -> Option<u32> {
+            match parent {
                 Some(p0) => {
-                    let d = |i: usize| pk[i] - p0_key[i];
+                    let d = |i: usize| (k[i] >> 1) - (k0[i] >> 1);
                     let pn = model.neighbors(p0)[neighbor_index(d(0), d(1), d(2))];
-                    (pn != NONE).then_some(pn)
+                    if pn == NONE {
+                        return None;
+                    }
+                    let c = model.nodes()[pn as usize].children[octant(k)];
+                    (c != NONE).then_some(c)
                 }
-                None => model.find(level + 1, pk),
+                None if top => model.find(level, k),
+                None => {
+                    let pn = model.find(level + 1, [k[0] >> 1, k[1] >> 1, k[2] >> 1])?;
+                    let c = model.nodes()[pn as usize].children[octant(k)];
+                    (c != NONE).then_some(c)
+                }
             }
         };
-        let child = |pn: u32, k: [i32; 3]| {
-            let c = model.nodes()[pn as usize].children[octant(k)];
-            (c != NONE).then_some(c)
-        };
-        if let Some(m) = p0.and_then(|p| child(p, k0)) {
+        if let Some(m) = lookup(k0) {
             self.visit(m, k0);
         }
         // Per axis, the smallest squared distance of any transformed mean to each cell
@@ -412,23 +412,29 @@ impl Search<'_> {
                 }
             }
         }
-        for px in lo[0] >> 1..=hi[0] >> 1 {
-            for py in lo[1] >> 1..=hi[1] >> 1 {
-                for pz in lo[2] >> 1..=hi[2] >> 1 {
-                    let Some(pn) = parent([px, py, pz]) else { continue };
-                    let children = &model.nodes()[pn as usize].children;
-                    for (o, &c) in children.iter().enumerate() {
-                        let k = [2 * px + (o >> 2) as i32, 2 * py + ((o >> 1) & 1) as i32, 2 * pz + (o & 1) as i32];
-                        if c == NONE || k == k0 || (0..3).any(|i| k[i] < lo[i] || k[i] > hi[i]) {
-                            continue;
-                        }
-                        let d: f64 = (0..3).map(|i| slab[i][(k[i] - lo[i]) as usize]).sum();
-                        if d >= self.best {
-                            // No read of the node: a lower bound for the cache is all we need.
-                            self.second = self.second.min(d);
-                            continue;
-                        }
-                        self.visit(c, k);
+        for (a, &dx) in slab[0].iter().enumerate().take((hi[0] - lo[0] + 1) as usize) {
+            if dx >= self.best {
+                self.second = self.second.min(dx);
+                continue;
+            }
+            for (b, &dy) in slab[1].iter().enumerate().take((hi[1] - lo[1] + 1) as usize) {
+                let dxy = dx + dy;
+                if dxy >= self.best {
+                    self.second = self.second.min(dxy);
+                    continue;
+                }
+                for (c, &dz) in slab[2].iter().enumerate().take((hi[2] - lo[2] + 1) as usize) {
+                    let k = [lo[0] + a as i32, lo[1] + b as i32, lo[2] + c as i32];
+                    let d = dxy + dz;
+                    if d >= self.best {
+                        // No memory read: a lower bound for the cache is all we need.
+                        self.second = self.second.min(d);
+                        continue;
+                    }
+                    if k != k0
+                        && let Some(m) = lookup(k)
+                    {
+                        self.visit(m, k);
                     }
                 }
             }
