@@ -193,9 +193,11 @@ impl Source {
 
     /// Says where a recording was damaged, once its end is reached.
     fn report_damage(&self) {
-        if let Source::Recording(r) = self
-            && let Some(d) = r.reader.damage()
-        {
+        let Source::Recording(r) = self else { return };
+        for chunk in r.reader.skipped_chunks() {
+            log_line(format_args!("camera: {} is damaged: {chunk}; its frames were skipped", r.path.display()));
+        }
+        if let Some(d) = r.reader.damage() {
             log_line(format_args!(
                 "camera: {} is damaged after {} messages ({}); published up to the damage",
                 r.path.display(),

@@ -54,8 +54,10 @@ pub struct ReplaySummary {
     pub objects: Vec<(String, [usize; 4], Vec<f64>)>,
     /// Wall-clock seconds of the whole replay (reading, decoding, tracking, writing).
     pub seconds: f64,
-    /// Where the recording was damaged.
+    /// Where the recording was damaged (and could not be read further).
     pub damage: Option<Damage>,
+    /// Damaged chunks that were skipped (indexed reading).
+    pub skipped_chunks: Vec<String>,
 }
 
 /// Replays the recording through the tracker.
@@ -122,6 +124,7 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
         objects: names.into_iter().zip(state.statuses).zip(state.track_ms).map(|((n, s), t)| (n, s, t)).collect(),
         seconds: started.elapsed().as_secs_f64(),
         damage: reader.damage().cloned(),
+        skipped_chunks: reader.skipped_chunks().to_vec(),
     })
 }
 
@@ -222,6 +225,9 @@ pub fn print_summary(s: &ReplaySummary) {
             s.seconds,
             s.tracked_frames as f64 / s.seconds
         );
+    }
+    for chunk in &s.skipped_chunks {
+        println!("warning: the recording is damaged: {chunk}; its frames were skipped, the rest replayed");
     }
     if let Some(d) = &s.damage {
         println!(

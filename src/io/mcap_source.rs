@@ -35,8 +35,83 @@ pub struct RawMessage<'a> {
     pub data: &'a [u8],
 }
 
+/// Reading through the chunk index; a damaged chunk is skipped (and reported) and the
+/// reading goes on with the chunks not yet read.
+struct Indexed {
+    file: File,
+    summary: Summary,
+    topics: Vec<String>,
+    reader: IndexedReader,
+    chunk: Vec<u8>,
+    /// Offsets of the chunks requested so far (the last one is being read).
+    requested: Vec<u64>,
+    /// `requested.len()` at the last skip.
+    requested_at_skip: usize,
+}
+
+impl Indexed {
+    fn new(file: File, summary: Summary, topics: &[&str]) -> Result<Self, McapError> {
+        let topics: Vec<String> = topics.iter().map(|t| t.to_string()).collect();
+        let reader = IndexedReader::new_with_options(&summary, Self::options(&topics))?;
+        Ok(Indexed { file, summary, topics, reader, chunk: Vec::new(), requested: Vec::new(), requested_at_skip: 0 })
+    }
+
+    fn options(topics: &[String]) -> IndexedReaderOptions {
+        IndexedReaderOptions::new().include_topics(topics.iter().cloned())
+    }
+
+    fn next(&mut self, payload: &mut Vec<u8>) -> Next {
+        loop {
+            match self.reader.next_event()? {
+                Err(e) => return Some(Err(e)),
+                Ok(IndexedReadEvent::ReadChunkRequest { offset, length }) => {
+                    self.requested.push(offset);
+                    self.chunk.resize(length, 0);
+                    let read =
+                        self.file.seek(SeekFrom::Start(offset)).and_then(|_| self.file.read_exact(&mut self.chunk));
+                    if let Err(e) = read {
+                        return Some(Err(e.into()));
+                    }
+                    if let Err(e) = self.reader.insert_chunk_record_data(offset, &self.chunk) {
+                        return Some(Err(e));
+                    }
+                }
+                Ok(IndexedReadEvent::Message { header, data }) => {
+                    let Some(channel) = self.summary.channels.get(&header.channel_id) else {
+                        return Some(Err(McapError::UnknownChannel(header.sequence, header.channel_id)));
+                    };
+                    payload.clear();
+                    payload.extend_from_slice(data);
+                    return Some(Ok((channel.clone(), header.log_time)));
+                }
+            }
+        }
+    }
+
+    /// After damage in the chunk read last: a reader over the chunks not requested yet.
+    /// Returns `false` if there is none left (or nothing was read since the last skip).
+    fn skip_damaged_chunk(&mut self) -> bool {
+        if self.requested.len() == self.requested_at_skip {
+            return false;
+        }
+        self.requested_at_skip = self.requested.len();
+        let mut rest = self.summary.clone();
+        rest.chunk_indexes.retain(|c| c.compressed_data_offset().is_ok_and(|offset| !self.requested.contains(&offset)));
+        if rest.chunk_indexes.is_empty() {
+            return false;
+        }
+        match IndexedReader::new_with_options(&rest, Self::options(&self.topics)) {
+            Ok(reader) => {
+                self.reader = reader;
+                true
+            }
+            Err(_) => false,
+        }
+    }
+}
+
 enum Source {
-    Indexed { file: File, reader: Box<IndexedReader>, channels: HashMap<u16, Arc<Channel<'static>>>, chunk: Vec<u8> },
+    Indexed(Box<Indexed>),
     Streamed { reader: Box<mcap::io::MessageReader<BufReader<File>>>, topics: Vec<String> },
 }
 
@@ -45,6 +120,7 @@ pub struct McapSource {
     source: Source,
     mode: ReadMode,
     counts: HashMap<String, u64>,
+    skipped: Vec<String>,
     payload: Vec<u8>,
     done: bool,
 }
@@ -90,11 +166,7 @@ impl McapSource {
             }
         }
         let source = match summary {
-            Some(summary) => {
-                let options = IndexedReaderOptions::new().include_topics(topics.iter().copied());
-                let reader = IndexedReader::new_with_options(&summary, options)?;
-                Source::Indexed { file, reader: Box::new(reader), channels: summary.channels, chunk: Vec::new() }
-            }
+            Some(summary) => Source::Indexed(Box::new(Indexed::new(file, summary, topics)?)),
             None => {
                 file.seek(SeekFrom::Start(0))?;
                 let reader = mcap::io::MessageReader::new(BufReader::with_capacity(1 << 20, file));
@@ -102,10 +174,10 @@ impl McapSource {
             }
         };
         let mode = match source {
-            Source::Indexed { .. } => ReadMode::Indexed,
+            Source::Indexed(_) => ReadMode::Indexed,
             Source::Streamed { .. } => ReadMode::Streamed,
         };
-        Ok(McapSource { source, mode, counts, payload: Vec::new(), done: false })
+        Ok(McapSource { source, mode, counts, skipped: Vec::new(), payload: Vec::new(), done: false })
     }
 
     /// How the file is read.
@@ -118,16 +190,32 @@ impl McapSource {
         self.counts.get(topic).copied()
     }
 
+    /// Damaged chunks that were skipped (indexed reading), with what was wrong.
+    pub fn skipped_chunks(&self) -> &[String] {
+        &self.skipped
+    }
+
     /// The next message of a chosen topic; `None` at the end; an error where the file is
-    /// damaged (after which the source is finished).
+    /// damaged and cannot be read further (after which the source is finished). In
+    /// indexed reading a damaged chunk is skipped ([`Self::skipped_chunks`]) instead.
     pub fn next_message(&mut self) -> Option<Result<RawMessage<'_>, McapError>> {
         if self.done {
             return None;
         }
         let next = match &mut self.source {
-            Source::Indexed { file, reader, channels, chunk } => {
-                next_indexed(file, reader, channels, chunk, &mut self.payload)
-            }
+            Source::Indexed(indexed) => loop {
+                match indexed.next(&mut self.payload) {
+                    Some(Err(e)) => {
+                        let offset = indexed.requested.last().copied().unwrap_or(0);
+                        self.skipped.push(format!("chunk at byte {offset}: {e}"));
+                        if indexed.skip_damaged_chunk() {
+                            continue;
+                        }
+                        break None;
+                    }
+                    other => break other,
+                }
+            },
             Source::Streamed { reader, topics } => next_streamed(reader, topics, &mut self.payload),
         };
         match next {
@@ -145,38 +233,6 @@ impl McapSource {
 }
 
 type Next = Option<Result<(Arc<Channel<'static>>, u64), McapError>>;
-
-fn next_indexed(
-    file: &mut File,
-    reader: &mut IndexedReader,
-    channels: &HashMap<u16, Arc<Channel<'static>>>,
-    chunk: &mut Vec<u8>,
-    payload: &mut Vec<u8>,
-) -> Next {
-    loop {
-        match reader.next_event()? {
-            Err(e) => return Some(Err(e)),
-            Ok(IndexedReadEvent::ReadChunkRequest { offset, length }) => {
-                chunk.resize(length, 0);
-                let read = file.seek(SeekFrom::Start(offset)).and_then(|_| file.read_exact(chunk));
-                if let Err(e) = read {
-                    return Some(Err(e.into()));
-                }
-                if let Err(e) = reader.insert_chunk_record_data(offset, chunk) {
-                    return Some(Err(e));
-                }
-            }
-            Ok(IndexedReadEvent::Message { header, data }) => {
-                let Some(channel) = channels.get(&header.channel_id) else {
-                    return Some(Err(McapError::UnknownChannel(header.sequence, header.channel_id)));
-                };
-                payload.clear();
-                payload.extend_from_slice(data);
-                return Some(Ok((channel.clone(), header.log_time)));
-            }
-        }
-    }
-}
 
 fn next_streamed(
     reader: &mut mcap::io::MessageReader<BufReader<File>>,

@@ -203,6 +203,12 @@ impl RecordingReader {
         self.damage.as_ref()
     }
 
+    /// Damaged chunks skipped in indexed reading (the frames in them are lost, the
+    /// others read), with what was wrong.
+    pub fn skipped_chunks(&self) -> &[String] {
+        self.source.skipped_chunks()
+    }
+
     /// The topics read.
     pub fn topics(&self) -> &RecordingTopics {
         &self.topics
