@@ -108,9 +108,12 @@ impl Recorder {
         let writer = std::thread::Builder::new()
             .name("mrsmap-recorder".into())
             .spawn(move || {
+                let mut ring = Ring::with_room(last_ns.map_or(0, ring_frames), max_pixels, names.len());
                 let mut out = Output { file, frames, poses, names, scratch: Vec::new(), written: 0 };
-                let mut ring = Ring::default();
-                for slot in full_rx {
+                // Wait once now: the channel allocates its waiting state on a thread's first
+                // blocking receive, which must not happen in the middle of a run.
+                let first = full_rx.recv_timeout(std::time::Duration::from_millis(2)).ok();
+                for slot in first.into_iter().chain(full_rx.iter()) {
                     match last_ns {
                         None => {
                             out.write(&slot)?;
@@ -183,14 +186,28 @@ struct Ring {
     spare: Vec<Slot>,
 }
 
+/// Frames of `keep_ns` at a 30 Hz camera (the ring is allocated for them at start; a
+/// faster camera grows it once to its size).
+fn ring_frames(keep_ns: u64) -> usize {
+    (keep_ns as f64 * 30e-9).ceil() as usize + 1
+}
+
 impl Ring {
+    /// A ring with buffers for `frames` frames of up to `pixels` pixels.
+    fn with_room(frames: usize, pixels: usize, objects: usize) -> Self {
+        Ring {
+            frames: VecDeque::with_capacity(frames),
+            spare: (0..frames).map(|_| *Slot::new(pixels, objects)).collect(),
+        }
+    }
+
     /// Adds a copy of `slot` and drops what is older than `keep_ns` before it; a stamp
     /// that goes back (a restarted or looping driver) starts the window again.
     fn keep(&mut self, slot: &Slot, keep_ns: u64) {
-        while let Some(front) = self.frames.front() {
-            if front.stamp_ns <= slot.stamp_ns && slot.stamp_ns - front.stamp_ns <= keep_ns {
-                break;
-            }
+        if self.frames.back().is_some_and(|newest| slot.stamp_ns < newest.stamp_ns) {
+            self.spare.extend(self.frames.drain(..));
+        }
+        while self.frames.front().is_some_and(|oldest| slot.stamp_ns - oldest.stamp_ns > keep_ns) {
             if let Some(old) = self.frames.pop_front() {
                 self.spare.push(old);
             }
@@ -261,6 +278,12 @@ mod tests {
         // The clock goes back (a restarted driver): the window starts again.
         add(2, &mut ring);
         assert_eq!(kept(&ring), [2]);
+        assert_eq!(ring.frames.len() + ring.spare.len(), 4);
+        // A looping source: 3, 4, then 3 again (before the newest, though not the oldest).
+        add(3, &mut ring);
+        add(4, &mut ring);
+        add(3, &mut ring);
+        assert_eq!(kept(&ring), [3]);
         assert_eq!(ring.frames.len() + ring.spare.len(), 4);
     }
 }

@@ -128,7 +128,7 @@ pub struct TrackArgs {
     #[arg(long, conflicts_with = "dataset")]
     pub record: Option<PathBuf>,
     /// Keep only the last this many seconds in the recording (held in memory, about
-    /// 55 MB per second of VGA at 30 Hz, and written at the end).
+    /// 55 MB per second of VGA at 30 Hz, allocated at start, and written at the end).
     #[arg(long, requires = "record")]
     pub record_last: Option<f64>,
     /// Offline: track every frame of this TUM dataset instead of listening to a camera.
