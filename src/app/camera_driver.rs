@@ -3,7 +3,7 @@
 //! loaned shared-memory samples, and notifies an event so that subscribers wake up.
 
 use super::report::log_line;
-use crate::frame::RgbdFrame;
+use crate::frame::{OwnedFrame, RgbdFrame};
 use crate::geometry::CameraModel;
 use crate::io::camera_file::read_camera;
 use crate::io::frames::{FrameLoader, halve};
@@ -67,12 +67,6 @@ pub struct CameraSummary {
     pub signalled: bool,
 }
 
-struct Decoded {
-    stamp_ns: u64,
-    rgb: Vec<u8>,
-    depth: Vec<u16>,
-}
-
 struct Recording {
     path: PathBuf,
     topics: RecordingTopics,
@@ -86,7 +80,7 @@ struct Recording {
 
 /// The frames to publish, one at a time.
 enum Source {
-    Dataset { loader: Box<FrameLoader>, frames: Vec<DatasetFrame>, cache: Vec<Decoded>, index: usize },
+    Dataset { loader: Box<FrameLoader>, frames: Vec<DatasetFrame>, cache: Vec<OwnedFrame>, index: usize },
     Recording(Box<Recording>),
 }
 
@@ -113,7 +107,9 @@ fn open_dataset(job: &CameraJob, dataset: &Path, camera: &Path) -> Result<(Sourc
     if frames.len() <= 64 {
         for entry in &frames {
             let f = loader.load(entry)?;
-            cache.push(Decoded { stamp_ns: f.stamp_ns, rgb: f.rgb.to_vec(), depth: f.depth.to_vec() });
+            let mut owned = OwnedFrame::default();
+            owned.copy_from(&f);
+            cache.push(owned);
         }
     }
     let what = format!("{} frames of {}", frames.len(), dataset.display());
@@ -174,8 +170,8 @@ impl Source {
             Source::Dataset { loader, frames, cache, index } => {
                 let Some(entry) = frames.get(*index) else { return Ok(None) };
                 *index += 1;
-                if let Some(d) = cache.get(*index - 1) {
-                    return Ok(Some(Ok(RgbdFrame::new(d.stamp_ns, loader.camera(), &d.rgb, &d.depth)?)));
+                if let Some(frame) = cache.get(*index - 1).and_then(OwnedFrame::view) {
+                    return Ok(Some(Ok(frame)));
                 }
                 let stamp = format_stamp(entry.depth_stamp_ns);
                 Ok(Some(loader.load(entry).map_err(|e| format!("frame {stamp}: {e}"))))

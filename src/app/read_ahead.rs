@@ -2,32 +2,11 @@
 //! decoding overlap the tracker step. Frames arrive in file order (the output does not
 //! depend on the timing); their buffers are handed back and reused.
 
-use crate::frame::RgbdFrame;
-use crate::geometry::CameraModel;
+use crate::frame::OwnedFrame;
 use crate::io::frames::halve;
 use crate::io::recording::{RecordingError, RecordingReader};
 use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 use std::thread::JoinHandle;
-
-/// A decoded frame that owns its pixels.
-#[derive(Debug, Default)]
-pub struct OwnedFrame {
-    /// Stamp (ns).
-    pub stamp_ns: u64,
-    /// Camera.
-    pub camera: Option<CameraModel>,
-    /// rgb8.
-    pub rgb: Vec<u8>,
-    /// Depth.
-    pub depth: Vec<u16>,
-}
-
-impl OwnedFrame {
-    /// The frame view.
-    pub fn frame(&self) -> Option<RgbdFrame<'_>> {
-        RgbdFrame::new(self.stamp_ns, self.camera?, &self.rgb, &self.depth).ok()
-    }
-}
 
 /// Frames read ahead by a separate thread.
 pub struct ReadAhead {
@@ -61,12 +40,7 @@ impl ReadAhead {
                         Ok(owned)
                     }
                     Ok(Some(f)) => {
-                        owned.stamp_ns = f.stamp_ns;
-                        owned.camera = Some(f.camera);
-                        owned.rgb.clear();
-                        owned.rgb.extend_from_slice(f.rgb);
-                        owned.depth.clear();
-                        owned.depth.extend_from_slice(f.depth);
+                        owned.copy_from(&f);
                         Ok(owned)
                     }
                     Ok(None) => break,

@@ -11,8 +11,8 @@
 //! that crashes leaves a `.partial` file that replays up to its end.
 
 use super::tracking::StepOutput;
-use crate::frame::RgbdFrame;
-use crate::geometry::{CameraModel, Pose};
+use crate::frame::{OwnedFrame, RgbdFrame};
+use crate::geometry::Pose;
 use crate::io::mcap_write::{DepthEncoding, FrameChannels, McapFile, ObjectPoseRecord, PoseChannels};
 use crate::io::recording::RecordingTopics;
 use crate::tracking::TrackingStatus;
@@ -52,22 +52,13 @@ struct PoseSnapshot {
 }
 
 struct Slot {
-    stamp_ns: u64,
-    camera: Option<CameraModel>,
-    rgb: Vec<u8>,
-    depth: Vec<u16>,
+    frame: OwnedFrame,
     poses: Vec<PoseSnapshot>,
 }
 
 impl Slot {
     fn new(pixels: usize, objects: usize) -> Box<Self> {
-        Box::new(Slot {
-            stamp_ns: 0,
-            camera: None,
-            rgb: Vec::with_capacity(3 * pixels),
-            depth: Vec::with_capacity(pixels),
-            poses: Vec::with_capacity(objects),
-        })
+        Box::new(Slot { frame: OwnedFrame::with_capacity(pixels), poses: Vec::with_capacity(objects) })
     }
 }
 
@@ -144,12 +135,7 @@ impl Recorder {
             self.dropped += 1;
             return;
         };
-        slot.stamp_ns = frame.stamp_ns;
-        slot.camera = Some(frame.camera);
-        slot.rgb.clear();
-        slot.rgb.extend_from_slice(frame.rgb);
-        slot.depth.clear();
-        slot.depth.extend_from_slice(frame.depth);
+        slot.frame.copy_from(frame);
         slot.poses.clear();
         for (object, e) in out.estimates.iter().enumerate().take(slot.poses.capacity()) {
             if e.status == TrackingStatus::Tracking {
@@ -204,19 +190,17 @@ impl Ring {
     /// Adds a copy of `slot` and drops what is older than `keep_ns` before it; a stamp
     /// that goes back (a restarted or looping driver) starts the window again.
     fn keep(&mut self, slot: &Slot, keep_ns: u64) {
-        if self.frames.back().is_some_and(|newest| slot.stamp_ns < newest.stamp_ns) {
+        let stamp_ns = slot.frame.stamp_ns;
+        if self.frames.back().is_some_and(|newest| stamp_ns < newest.frame.stamp_ns) {
             self.spare.extend(self.frames.drain(..));
         }
-        while self.frames.front().is_some_and(|oldest| slot.stamp_ns - oldest.stamp_ns > keep_ns) {
+        while self.frames.front().is_some_and(|oldest| stamp_ns - oldest.frame.stamp_ns > keep_ns) {
             if let Some(old) = self.frames.pop_front() {
                 self.spare.push(old);
             }
         }
-        let mut copy = self.spare.pop().unwrap_or_else(|| *Slot::new(slot.depth.len(), slot.poses.capacity()));
-        copy.stamp_ns = slot.stamp_ns;
-        copy.camera = slot.camera;
-        copy.rgb.clone_from(&slot.rgb);
-        copy.depth.clone_from(&slot.depth);
+        let mut copy = self.spare.pop().unwrap_or_else(|| *Slot::new(slot.frame.depth.len(), slot.poses.capacity()));
+        copy.frame.clone_from(&slot.frame);
         copy.poses.clone_from(&slot.poses);
         self.frames.push_back(copy);
     }
@@ -233,9 +217,8 @@ struct Output {
 
 impl Output {
     fn write(&mut self, slot: &Slot) -> Result<()> {
-        let Some(camera) = slot.camera else { return Ok(()) };
-        let frame = RgbdFrame::new(slot.stamp_ns, camera, &slot.rgb, &slot.depth)?;
-        self.frames.write_frame(&mut self.file, &frame, slot.stamp_ns, &mut self.scratch)?;
+        let Some(frame) = slot.frame.view() else { return Ok(()) };
+        self.frames.write_frame(&mut self.file, &frame, frame.stamp_ns, &mut self.scratch)?;
         let records: Vec<ObjectPoseRecord<'_>> = slot
             .poses
             .iter()
@@ -246,7 +229,7 @@ impl Output {
                 covariance_ros: p.covariance_ros,
             })
             .collect();
-        self.poses.write(&mut self.file, slot.stamp_ns, &records)?;
+        self.poses.write(&mut self.file, slot.frame.stamp_ns, &records)?;
         self.written += 1;
         Ok(())
     }
@@ -261,19 +244,23 @@ mod tests {
         let mut ring = Ring::default();
         let mut slot = Slot::new(2, 1);
         let mut add = |second: u64, ring: &mut Ring| {
-            slot.stamp_ns = second * 1_000_000_000;
-            slot.rgb.clear();
-            slot.rgb.extend([second as u8; 6]);
-            slot.depth.clear();
-            slot.depth.extend([second as u16; 2]);
+            slot.frame.stamp_ns = second * 1_000_000_000;
+            slot.frame.rgb.clear();
+            slot.frame.rgb.extend([second as u8; 6]);
+            slot.frame.depth.clear();
+            slot.frame.depth.extend([second as u16; 2]);
             ring.keep(&slot, 3_000_000_000);
         };
         for second in 0..=10 {
             add(second, &mut ring);
         }
-        let kept = |ring: &Ring| ring.frames.iter().map(|s| s.stamp_ns / 1_000_000_000).collect::<Vec<_>>();
+        let kept = |ring: &Ring| ring.frames.iter().map(|s| s.frame.stamp_ns / 1_000_000_000).collect::<Vec<_>>();
         assert_eq!(kept(&ring), [7, 8, 9, 10]);
-        assert!(ring.frames.iter().all(|s| u64::from(s.rgb[0]) == s.stamp_ns / 1_000_000_000 && s.depth.len() == 2));
+        assert!(
+            ring.frames
+                .iter()
+                .all(|s| u64::from(s.frame.rgb[0]) == s.frame.stamp_ns / 1_000_000_000 && s.frame.depth.len() == 2)
+        );
         assert_eq!(ring.frames.len() + ring.spare.len(), 4, "buffers are reused");
         // The clock goes back (a restarted driver): the window starts again.
         add(2, &mut ring);

@@ -162,7 +162,7 @@ impl Replay {
             if job.max_frames.is_some_and(|m| self.frames >= m) {
                 break;
             }
-            let Some(frame) = owned.frame() else {
+            let Some(frame) = owned.view() else {
                 frames.give_back(owned);
                 continue;
             };

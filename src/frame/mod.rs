@@ -78,3 +78,54 @@ impl<'a> RgbdFrame<'a> {
         self.depth.iter().filter(|&&d| d != 0).count()
     }
 }
+
+/// A frame that owns its pixels: buffers that are refilled from borrowed frames, so a
+/// frame can outlive the buffer it was read into (read-ahead, recording, caches).
+#[derive(Debug, Default, PartialEq)]
+pub struct OwnedFrame {
+    /// Capture time (ns).
+    pub stamp_ns: u64,
+    /// The camera, once a frame was copied in.
+    pub camera: Option<CameraModel>,
+    /// Row-major RGB8.
+    pub rgb: Vec<u8>,
+    /// Row-major depth in units of the camera's depth scale.
+    pub depth: Vec<u16>,
+}
+
+impl OwnedFrame {
+    /// Empty, with room for frames of up to `pixels` pixels (copying one in then does
+    /// not allocate).
+    pub fn with_capacity(pixels: usize) -> Self {
+        OwnedFrame { stamp_ns: 0, camera: None, rgb: Vec::with_capacity(3 * pixels), depth: Vec::with_capacity(pixels) }
+    }
+
+    /// Copies `frame` in, reusing the buffers.
+    pub fn copy_from(&mut self, frame: &RgbdFrame<'_>) {
+        self.stamp_ns = frame.stamp_ns;
+        self.camera = Some(frame.camera);
+        self.rgb.clear();
+        self.rgb.extend_from_slice(frame.rgb);
+        self.depth.clear();
+        self.depth.extend_from_slice(frame.depth);
+    }
+
+    /// The frame, if one was copied in.
+    pub fn view(&self) -> Option<RgbdFrame<'_>> {
+        RgbdFrame::new(self.stamp_ns, self.camera?, &self.rgb, &self.depth).ok()
+    }
+}
+
+/// `clone_from` reuses the buffers (the derived one would allocate new ones).
+impl Clone for OwnedFrame {
+    fn clone(&self) -> Self {
+        OwnedFrame { stamp_ns: self.stamp_ns, camera: self.camera, rgb: self.rgb.clone(), depth: self.depth.clone() }
+    }
+
+    fn clone_from(&mut self, source: &Self) {
+        self.stamp_ns = source.stamp_ns;
+        self.camera = source.camera;
+        self.rgb.clone_from(&source.rgb);
+        self.depth.clone_from(&source.depth);
+    }
+}
