@@ -173,7 +173,7 @@ fn handle(job: &PosesJob, p: &ObjectPose, summary: &mut PosesSummary, trajectori
 
 fn write_trajectories(out: &Path, trajectories: &BTreeMap<String, String>) -> Result<()> {
     for (name, lines) in trajectories {
-        let path = if trajectories.len() == 1 { out.to_path_buf() } else { with_suffix(out, name) };
+        let path = object_trajectory_path(out, name, trajectories.len());
         let text = format!(
             "# mrsmap poses: object_from_camera of '{name}' (the camera in the object frame), stamped with the frames' depth timestamps\n# timestamp tx ty tz qx qy qz qw\n{lines}"
         );
@@ -182,8 +182,14 @@ fn write_trajectories(out: &Path, trajectories: &BTreeMap<String, String>) -> Re
     Ok(())
 }
 
+/// Where object `name`'s trajectory goes when `objects` objects are tracked: `path`
+/// itself for one object, else `path` suffixed by the name.
+pub fn object_trajectory_path(path: &Path, name: &str, objects: usize) -> PathBuf {
+    if objects == 1 { path.to_path_buf() } else { with_suffix(path, name) }
+}
+
 /// `dir/traj.txt` + `teddy` → `dir/traj.teddy.txt`.
-pub fn with_suffix(path: &Path, name: &str) -> PathBuf {
+fn with_suffix(path: &Path, name: &str) -> PathBuf {
     let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
     let file = match path.extension() {
         Some(ext) => format!("{stem}.{name}.{}", ext.to_string_lossy()),

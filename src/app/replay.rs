@@ -2,7 +2,7 @@
 //! frame of an MCAP recording; poses out as MCAP (ROS 2 and Foxglove) and TUM trajectories.
 
 use super::dataset::thread_pool;
-use super::poses_client::with_suffix;
+use super::poses_client::object_trajectory_path;
 use super::read_ahead::ReadAhead;
 use super::report::{percentile, progress_bar};
 use super::tracking::{StepOutput, load_tracker, track_frame};
@@ -108,7 +108,7 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
     }
     if let Some(path) = &job.trajectory {
         for (k, name) in names.iter().enumerate() {
-            let path = if names.len() == 1 { path.clone() } else { with_suffix(path, name) };
+            let path = object_trajectory_path(path, name, names.len());
             let header = format!(
                 "mrsmap replay: object_from_camera of '{name}' (frames where it was tracked), stamped with depth timestamps\nrecording {}",
                 job.input.display()

@@ -2,7 +2,7 @@
 //! (every frame, no drops), with the accuracy against ground truth when it exists.
 
 use super::dataset::thread_pool;
-use super::poses_client::with_suffix;
+use super::poses_client::object_trajectory_path;
 use super::report::{percentile, progress_bar};
 use super::tracking::{StepOutput, invalid_frame, load_tracker, track_frame};
 use crate::eval::{ErrorStats, align_rigid};
@@ -121,7 +121,7 @@ pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<Vec<ObjectRe
             r.raw = Some(ErrorStats::of(&x.iter().zip(&y).map(|(a, b)| (b - a).norm()).collect::<Vec<_>>()));
         }
         if let Some(path) = &job.trajectory {
-            let path = if config.objects.len() == 1 { path.clone() } else { with_suffix(path, &r.name) };
+            let path = object_trajectory_path(path, &r.name, config.objects.len());
             let header = format!(
                 "mrsmap track: object_from_camera of '{}' (frames where it was tracked), stamped with depth timestamps\ndataset {}",
                 r.name,
