@@ -11,9 +11,10 @@ const HALF_SQRT3: f32 = 0.866_025_4;
 #[inline]
 pub fn rgb8_to_lab(r: u8, g: u8, b: u8) -> [f32; 3] {
     const INV255: f32 = 1.0 / 255.0;
+    // Extremes on the integers: scaling is monotonic, so the result is the same as on
+    // the scaled values, without the NaN handling of `f32::max` per pixel.
+    let (max, min) = (r.max(g).max(b) as f32 * INV255, r.min(g).min(b) as f32 * INV255);
     let (r, g, b) = (r as f32 * INV255, g as f32 * INV255, b as f32 * INV255);
-    let max = r.max(g).max(b);
-    let min = r.min(g).min(b);
     [0.5 * (max + min), r - 0.5 * (g + b), HALF_SQRT3 * (g - b)]
 }
 

@@ -21,7 +21,7 @@ use super::workspace::{Association, NODE_CHUNK, Partial, PassState};
 use crate::frame::rays::VIEW_AXES;
 use crate::geometry::Pose;
 use crate::map::tree::octant;
-use crate::map::{MAX_LEVELS, NONE, Node, SELF_NEIGHBOR, descriptor_distance2, neighbor_index};
+use crate::map::{MAX_LEVELS, NONE, Node, SELF_NEIGHBOR, descriptor_distance2};
 use nalgebra::Vector3;
 use rayon::prelude::*;
 
@@ -139,6 +139,17 @@ impl Finer<'_> {
     }
 }
 
+/// The key offset of each entry of a node's 27-neighbourhood (`neighbor_index` order).
+const NEIGHBOR_OFFSETS: [[i32; 3]; 27] = {
+    let mut out = [[0; 3]; 27];
+    let mut k = 0;
+    while k < 27 {
+        out[k] = [(k / 9) as i32 - 1, ((k / 3) % 3) as i32 - 1, (k % 3) as i32 - 1];
+        k += 1;
+    }
+    out
+};
+
 /// A usable scene surfel of the node in work: index, mean, transformed mean.
 type Transformed = (u32, Vector3<f64>, Vector3<f64>);
 
@@ -199,9 +210,8 @@ fn associate_node(
         let key = model.nodes()[previous.model_node as usize].key;
         let neighbors = model.neighbors(previous.model_node);
         search.visit(neighbors[SELF_NEIGHBOR], key);
-        for (k, &m) in neighbors.iter().enumerate() {
+        for ((k, &m), d) in neighbors.iter().enumerate().zip(&NEIGHBOR_OFFSETS) {
             if k != SELF_NEIGHBOR && m != NONE {
-                let d = [(k / 9) as i32 - 1, ((k / 3) % 3) as i32 - 1, (k % 3) as i32 - 1];
                 search.visit(m, [key[0] + d[0], key[1] + d[1], key[2] + d[2]]);
             }
         }
@@ -376,35 +386,17 @@ impl Search<'_> {
         let lo = model.key_of(&(center - Vector3::repeat(radius)), level);
         let hi = model.key_of(&(center + Vector3::repeat(radius)), level);
         let k0 = model.key_of(center, level);
-        let top = level + 1 >= model.num_levels();
-        let parent = if top { None } else { model.find(level + 1, [k0[0] >> 1, k0[1] >> 1, k0[2] >> 1]) };
-        let lookup = |k: [i32; 3]| -> Option<u32> {
-            match parent {
-                Some(p0) => {
-                    let d = |i: usize| (k[i] >> 1) - (k0[i] >> 1);
-                    let pn = model.neighbors(p0)[neighbor_index(d(0), d(1), d(2))];
-                    if pn == NONE {
-                        return None;
-                    }
-                    let c = model.nodes()[pn as usize].children[octant(k)];
-                    (c != NONE).then_some(c)
-                }
-                None if top => model.find(level, k),
-                None => {
-                    let pn = model.find(level + 1, [k[0] >> 1, k[1] >> 1, k[2] >> 1])?;
-                    let c = model.nodes()[pn as usize].children[octant(k)];
-                    (c != NONE).then_some(c)
-                }
-            }
-        };
-        if let Some(m) = lookup(k0) {
+        let n = [0, 1, 2].map(|i| (hi[i] - lo[i] + 1) as usize);
+        let cells = CubeCells::new(model, level, lo, k0, n);
+        let j0 = [0, 1, 2].map(|i| (k0[i] - lo[i]) as usize);
+        if let Some(m) = cells.get(j0) {
             self.visit(m, k0);
         }
         // Per axis, the smallest squared distance of any transformed mean to each cell
         // slab: their sum bounds the distance to a cell from below.
         let mut slab = [[f64::INFINITY; 5]; 3];
         for (i, axis) in slab.iter_mut().enumerate() {
-            for (j, v) in axis.iter_mut().enumerate().take((hi[i] - lo[i] + 1) as usize) {
+            for (j, v) in axis.iter_mut().enumerate().take(n[i]) {
                 let cell_lo = (lo[i] + j as i32) as f64 * self.res;
                 for (_, _, p) in self.transformed {
                     let d = (cell_lo - p[i]).max(p[i] - cell_lo - self.res).max(0.0);
@@ -412,33 +404,91 @@ impl Search<'_> {
                 }
             }
         }
-        for (a, &dx) in slab[0].iter().enumerate().take((hi[0] - lo[0] + 1) as usize) {
+        for (a, &dx) in slab[0].iter().enumerate().take(n[0]) {
             if dx >= self.best {
                 self.second = self.second.min(dx);
                 continue;
             }
-            for (b, &dy) in slab[1].iter().enumerate().take((hi[1] - lo[1] + 1) as usize) {
+            for (b, &dy) in slab[1].iter().enumerate().take(n[1]) {
                 let dxy = dx + dy;
                 if dxy >= self.best {
                     self.second = self.second.min(dxy);
                     continue;
                 }
-                for (c, &dz) in slab[2].iter().enumerate().take((hi[2] - lo[2] + 1) as usize) {
-                    let k = [lo[0] + a as i32, lo[1] + b as i32, lo[2] + c as i32];
+                for (c, &dz) in slab[2].iter().enumerate().take(n[2]) {
                     let d = dxy + dz;
                     if d >= self.best {
                         // No memory read: a lower bound for the cache is all we need.
                         self.second = self.second.min(d);
                         continue;
                     }
-                    if k != k0
-                        && let Some(m) = lookup(k)
+                    if [a, b, c] != j0
+                        && let Some(m) = cells.get([a, b, c])
                     {
-                        self.visit(m, k);
+                        self.visit(m, [lo[0] + a as i32, lo[1] + b as i32, lo[2] + c as i32]);
                     }
                 }
             }
         }
+    }
+}
+
+/// The model nodes of one level in a cube of at most 5 cells per axis, found through
+/// the parent cell containing the cube's centre: the cube spans at most three parent
+/// cells per axis, all in that parent's 27-neighbourhood. Per axis and cell the parts
+/// of the neighbour index and of the octant are computed once.
+struct CubeCells<'a> {
+    model: &'a crate::map::SurfelMap,
+    level: usize,
+    lo: [i32; 3],
+    /// The centre's parent and its neighbours, if it exists.
+    parent: Option<&'a [u32; 27]>,
+    /// Per axis and cell of the cube: its term of the parent's neighbour index.
+    neighbor_part: [[u8; 5]; 3],
+    /// Per axis and cell of the cube: its bit of the octant in its parent.
+    octant_part: [[u8; 5]; 3],
+}
+
+impl<'a> CubeCells<'a> {
+    fn new(model: &'a crate::map::SurfelMap, level: usize, lo: [i32; 3], k0: [i32; 3], n: [usize; 3]) -> Self {
+        let top = level + 1 >= model.num_levels();
+        let parent = if top { None } else { model.find(level + 1, [k0[0] >> 1, k0[1] >> 1, k0[2] >> 1]) };
+        let mut neighbor_part = [[0u8; 5]; 3];
+        let mut octant_part = [[0u8; 5]; 3];
+        for i in 0..3 {
+            let weight = [9, 3, 1][i];
+            for j in 0..n[i] {
+                let k = lo[i] + j as i32;
+                neighbor_part[i][j] = (weight * ((k >> 1) - (k0[i] >> 1) + 1)) as u8;
+                octant_part[i][j] = ((k & 1) << (2 - i)) as u8;
+            }
+        }
+        CubeCells { model, level, lo, parent: parent.map(|p| model.neighbors(p)), neighbor_part, octant_part }
+    }
+
+    /// The model node of the cell at offset `j` from the cube's low corner.
+    #[inline(always)]
+    fn get(&self, j: [usize; 3]) -> Option<u32> {
+        let model = self.model;
+        let (pn, octant) = match self.parent {
+            Some(neighbors) => {
+                let (np, op) = (&self.neighbor_part, &self.octant_part);
+                let pn = neighbors[(np[0][j[0]] + np[1][j[1]] + np[2][j[2]]) as usize];
+                (pn, (op[0][j[0]] | op[1][j[1]] | op[2][j[2]]) as usize)
+            }
+            None => {
+                let k = [0, 1, 2].map(|i| self.lo[i] + j[i] as i32);
+                if self.level + 1 >= model.num_levels() {
+                    return model.find(self.level, k);
+                }
+                (model.find(self.level + 1, [k[0] >> 1, k[1] >> 1, k[2] >> 1])?, octant(k))
+            }
+        };
+        if pn == NONE {
+            return None;
+        }
+        let c = model.nodes()[pn as usize].children[octant];
+        (c != NONE).then_some(c)
     }
 }
 

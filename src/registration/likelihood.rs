@@ -115,11 +115,24 @@ fn best_match(
         return f64::INFINITY;
     };
     let mut best = f64::INFINITY;
+    let fixed_trace = c.trace() + reg.trace();
     for &m in b.neighbors(center).iter().filter(|&&m| m != NONE) {
         for &sb in b.nodes()[m as usize].surfels.iter().filter(|&&s| s != NONE) {
             let other = &b.surfels()[sb as usize];
+            if !other.usable() {
+                continue;
+            }
+            let d = other.mean.cast::<f64>() - p;
+            // `dᵀΣ⁻¹d ≥ |d|² / λ_max(Σ) ≥ |d|² / tr(Σ)` (Σ positive definite): a candidate
+            // whose bound cannot beat the best so far (or the floor, all that matters of an
+            // unmatched surfel) is skipped before the inverse. The margin covers rounding.
+            let [xx, _, _, yy, _, zz] = other.cov_packed;
+            let trace = fixed_trace + (xx + yy + zz) as f64;
+            if d.norm_squared() > best.min(CHI2_FLOOR) * trace * (1.0 + 1e-6) {
+                continue;
+            }
             let oa = crate::frame::rays::VIEW_AXES[other.dir as usize];
-            if !other.usable() || view.dot(&Vector3::new(oa[0], oa[1], oa[2])) < 0.5 {
+            if view.dot(&Vector3::new(oa[0], oa[1], oa[2])) < 0.5 {
                 continue;
             }
             if normal.dot(&b.normals()[sb as usize]) < NORMAL_MIN_COS {
@@ -127,7 +140,6 @@ fn best_match(
             }
             let sigma = c + other.cov() + reg;
             let Some(inv) = sigma.try_inverse() else { continue };
-            let d = other.mean.cast::<f64>() - p;
             best = best.min(d.dot(&(inv * d)));
         }
     }
