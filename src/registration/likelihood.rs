@@ -114,10 +114,21 @@ fn best_match(
     }) else {
         return f64::INFINITY;
     };
+    // The view directions of `b` within 60° of the rotated view direction (a node holds
+    // its surfel of direction `k` in slot `k`), in slot order.
+    let mut dirs = [0usize; 6];
+    let mut num_dirs = 0;
+    for (k, oa) in crate::frame::rays::VIEW_AXES.iter().enumerate() {
+        if view.dot(&Vector3::new(oa[0], oa[1], oa[2])) >= 0.5 {
+            dirs[num_dirs] = k;
+            num_dirs += 1;
+        }
+    }
     let mut best = f64::INFINITY;
     let fixed_trace = c.trace() + reg.trace();
     for &m in b.neighbors(center).iter().filter(|&&m| m != NONE) {
-        for &sb in b.nodes()[m as usize].surfels.iter().filter(|&&s| s != NONE) {
+        let slots = &b.nodes()[m as usize].surfels;
+        for &sb in dirs[..num_dirs].iter().map(|&k| &slots[k]).filter(|&&s| s != NONE) {
             let other = &b.surfels()[sb as usize];
             if !other.usable() {
                 continue;
@@ -129,10 +140,6 @@ fn best_match(
             let [xx, _, _, yy, _, zz] = other.cov_packed;
             let trace = fixed_trace + (xx + yy + zz) as f64;
             if d.norm_squared() > best.min(CHI2_FLOOR) * trace * (1.0 + 1e-6) {
-                continue;
-            }
-            let oa = crate::frame::rays::VIEW_AXES[other.dir as usize];
-            if view.dot(&Vector3::new(oa[0], oa[1], oa[2])) < 0.5 {
                 continue;
             }
             if normal.dot(&b.normals()[sb as usize]) < NORMAL_MIN_COS {
