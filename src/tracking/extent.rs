@@ -101,9 +101,42 @@ impl ModelExtent {
         (lo, hi)
     }
 
+    /// The image columns and rows `((u_min, u_max), (v_min, v_max))` between which the
+    /// gate's ellipsoid `(x − μ)ᵀ Σ⁻¹ (x − μ) ≤ χ²` projects, `None` if the camera centre
+    /// is inside it (or it reaches behind the camera). A plane through the camera centre
+    /// `n(s) = a + s·b` is tangent to the ellipsoid (centre `c`, shape `M = χ² Σ`, camera
+    /// frame) when `(n·c)² = nᵀ M n`: a quadratic in the image coordinate `s`.
+    fn ellipse_bounds(
+        &self,
+        camera_from_object: &Pose,
+        camera: &CameraModel,
+        max_mahalanobis2: f64,
+    ) -> Option<((f64, f64), (f64, f64))> {
+        let r = camera_from_object.rotation.to_rotation_matrix().into_inner();
+        let c = camera_from_object * Point3::from(self.mean);
+        let shape = r * self.covariance * r.transpose() * max_mahalanobis2;
+        let k = &camera.intrinsics;
+        // Columns: the plane fx·x + (cx − u)·z = 0; rows: fy·y + (cy − v)·z = 0.
+        let along = |a: Vector3<f64>| -> Option<(f64, f64)> {
+            let b = Vector3::new(0.0, 0.0, -1.0);
+            let (ac, bc) = (a.dot(&c.coords), b.dot(&c.coords));
+            let qa = bc * bc - b.dot(&(shape * b));
+            let qb = ac * bc - a.dot(&(shape * b));
+            let qc = ac * ac - a.dot(&(shape * a));
+            let disc = qb * qb - qa * qc;
+            if qa <= 0.0 || disc < 0.0 {
+                return None;
+            }
+            let root = disc.sqrt();
+            Some(((-qb - root) / qa, (-qb + root) / qa))
+        };
+        Some((along(Vector3::new(k.fx, 0.0, k.cx))?, along(Vector3::new(0.0, k.fy, k.cy))?))
+    }
+
     /// The region of interest of a frame from `camera` when the object is at
-    /// `object_from_camera`: the projection of the gate's bounding box, grown by the
-    /// margin, with the gate. The whole image if the box reaches behind the camera.
+    /// `object_from_camera`: the projection of the gate's bounding box, narrowed to the
+    /// image of the gate's ellipsoid, grown by the margin, with the gate. The whole image
+    /// if the box reaches behind the camera.
     pub fn region(&self, object_from_camera: &Pose, camera: &CameraModel, params: &TrackerParams) -> ImageRegion {
         let (w, h) = (camera.width as usize, camera.height as usize);
         let gate = self.gate(object_from_camera, params.gate_mahalanobis2);
@@ -124,6 +157,12 @@ impl ModelExtent {
             }
             let (u, v) = (k.fx * c.x / c.z + k.cx, k.fy * c.y / c.z + k.cy);
             (u_min, u_max, v_min, v_max) = (u_min.min(u), u_max.max(u), v_min.min(v), v_max.max(v));
+        }
+        // The gate keeps only points inside its ellipsoid: the tangent planes through the
+        // camera centre bound its image more tightly than the corners of its box.
+        if let Some((eu, ev)) = self.ellipse_bounds(&camera_from_object, camera, params.gate_mahalanobis2) {
+            (u_min, u_max) = (u_min.max(eu.0), u_max.min(eu.1));
+            (v_min, v_max) = (v_min.max(ev.0), v_max.min(ev.1));
         }
         let m = params.region_margin_px;
         let clamp = |x: f64, n: usize| x.clamp(0.0, n as f64) as usize;
@@ -164,6 +203,44 @@ mod tests {
         let close = Pose::from_parts(Translation3::new(0.0, 0.0, -0.05), UnitQuaternion::identity());
         let r = e.region(&close, &camera(), &TrackerParams::default());
         assert_eq!((r.rows, r.cols), (0..480, 0..640));
+    }
+
+    #[test]
+    fn the_ellipse_bounds_are_the_extremes_of_the_projected_ellipsoid() {
+        // A tilted, elongated ellipsoid 0.8 m in front of the camera, off-centre.
+        let l = Matrix3::new(0.05, 0.0, 0.0, 0.02, 0.03, 0.0, -0.01, 0.015, 0.02);
+        let covariance = l * l.transpose();
+        let mean = Vector3::new(0.1, -0.05, 0.2);
+        let wide = (Vector3::repeat(-10.0), Vector3::repeat(10.0));
+        let e = ModelExtent::new(mean, covariance, None, wide).expect("extent");
+        let camera_from_object =
+            Pose::from_parts(Translation3::new(0.05, 0.02, 0.6), UnitQuaternion::from_euler_angles(0.3, -0.2, 0.5));
+        let chi2 = 12.0;
+        let ((u0, u1), (v0, v1)) = e.ellipse_bounds(&camera_from_object, &camera(), chi2).expect("in front");
+        // Points on the surface: μ + √χ² L s for unit s.
+        let k = camera().intrinsics;
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for i in 0..200 {
+            for j in 0..400 {
+                let (theta, phi) = (std::f64::consts::PI * i as f64 / 199.0, std::f64::consts::TAU * j as f64 / 400.0);
+                let unit = Vector3::new(theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos());
+                let p = camera_from_object * Point3::from(mean + l * unit * chi2.sqrt());
+                let uv = [k.fx * p.x / p.z + k.cx, k.fy * p.y / p.z + k.cy];
+                for a in 0..2 {
+                    lo[a] = lo[a].min(uv[a]);
+                    hi[a] = hi[a].max(uv[a]);
+                }
+            }
+        }
+        for (got, sampled) in [(u0, lo[0]), (v0, lo[1])] {
+            assert!(got <= sampled + 1e-9 && got > sampled - 0.5, "{got} vs {sampled}");
+        }
+        for (got, sampled) in [(u1, hi[0]), (v1, hi[1])] {
+            assert!(got >= sampled - 1e-9 && got < sampled + 0.5, "{got} vs {sampled}");
+        }
+        // The camera inside the ellipsoid: no bounds.
+        let inside = Pose::from_parts(Translation3::from(-mean), UnitQuaternion::identity());
+        assert!(e.ellipse_bounds(&inside, &camera(), chi2).is_none());
     }
 
     #[test]

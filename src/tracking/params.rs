@@ -18,7 +18,7 @@ pub struct TrackerParams {
     /// model's point distribution (its root statistics) are not used (§5.2; the
     /// original: 8 · 1.5 = 12 within 3 m).
     pub gate_mahalanobis2: f64,
-    /// The image region processed is the projection of the gate's bounding box, grown by
+    /// The image region processed is the image of the gate (its box and ellipsoid), grown by
     /// this many pixels on each side for the motion the prediction misses.
     pub region_margin_px: f64,
     /// A registration counts as good when its quality (the matching log-likelihood per
