@@ -383,9 +383,14 @@ impl Search<'_> {
     /// most three parent cells per axis, all in that parent's 27-neighbourhood.
     fn cube(&mut self, center: &Vector3<f64>, radius: f64, level: usize) {
         let model = self.input.terms.model;
+        let k0 = model.key_of(center, level);
+        // At most two cells on either side of the centre's (the radius is ≤ 2 cells; a
+        // third can appear only by rounding, at the radius): five per axis, all within
+        // the 27-neighbourhood of the centre's parent.
         let lo = model.key_of(&(center - Vector3::repeat(radius)), level);
         let hi = model.key_of(&(center + Vector3::repeat(radius)), level);
-        let k0 = model.key_of(center, level);
+        let lo = [0, 1, 2].map(|i| lo[i].max(k0[i] - 2));
+        let hi = [0, 1, 2].map(|i| hi[i].min(k0[i] + 2));
         let n = [0, 1, 2].map(|i| (hi[i] - lo[i] + 1) as usize);
         let cells = CubeCells::new(model, level, lo, k0, n);
         let j0 = [0, 1, 2].map(|i| (k0[i] - lo[i]) as usize);
