@@ -5,14 +5,13 @@
 
 mod common;
 
-use common::counting_alloc::{ALLOCATIONS, ARMED, Counting};
+use common::counting_alloc::{Counting, start_counting, stop_counting};
 use common::*;
 use mrsmap::app::recorder::RecordOptions;
 use mrsmap::app::tracker_process::{LiveTracker, RunLimits, StopReason};
 use mrsmap::io::recording::{RecordingReader, RecordingTopics};
 use mrsmap::io::tracker_config::read_tracker_config;
 use mrsmap::io::wire::RgbdFrameVga;
-use std::sync::atomic::Ordering;
 use std::time::Duration;
 
 #[global_allocator]
@@ -35,16 +34,14 @@ fn the_live_loop_with_a_ring_recording_allocates_nothing_per_frame() {
     let summary = tracker
         .run(&limits, &mut |event| {
             if event.frames == WARM_UP {
-                ALLOCATIONS.store(0, Ordering::SeqCst);
-                ARMED.store(true, Ordering::SeqCst);
+                start_counting();
             }
             if event.frames == WARM_UP + COUNTED {
-                ARMED.store(false, Ordering::SeqCst);
+                stop_counting();
             }
         })
         .expect("loop runs");
-    ARMED.store(false, Ordering::SeqCst);
-    let allocations = ALLOCATIONS.load(Ordering::SeqCst);
+    let allocations = stop_counting();
     let stats = tracker.finish_recording().expect("recording finishes").expect("a recording");
     println!("{summary:?}\n{stats:?}\n{allocations} allocations");
     assert_eq!(summary.stop, StopReason::FrameLimit, "the driver kept sending");

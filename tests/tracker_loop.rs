@@ -4,12 +4,11 @@
 
 mod common;
 
-use common::counting_alloc::{ALLOCATIONS, ARMED, Counting};
+use common::counting_alloc::{Counting, start_counting, stop_counting};
 use common::*;
 use mrsmap::app::tracker_process::{LiveTracker, RunLimits, StopReason};
 use mrsmap::io::tracker_config::read_tracker_config;
 use mrsmap::io::wire::RgbdFrameVga;
-use std::sync::atomic::Ordering;
 use std::time::Duration;
 
 #[global_allocator]
@@ -31,19 +30,17 @@ fn the_live_loop_allocates_nothing_per_frame() {
     let summary = tracker
         .run(&limits, &mut |event| {
             if event.frames == WARM_UP {
-                ALLOCATIONS.store(0, Ordering::SeqCst);
-                ARMED.store(true, Ordering::SeqCst);
+                start_counting();
             } else if event.frames > WARM_UP {
                 counted_frames += 1;
                 tracking += usize::from(event.output.estimates[0].status == mrsmap::tracking::TrackingStatus::Tracking);
             }
             if event.frames == WARM_UP + COUNTED {
-                ARMED.store(false, Ordering::SeqCst);
+                stop_counting();
             }
         })
         .expect("loop runs");
-    ARMED.store(false, Ordering::SeqCst);
-    let allocations = ALLOCATIONS.load(Ordering::SeqCst);
+    let allocations = stop_counting();
     println!("{summary:?}\n{counted_frames} frames counted, {tracking} tracking, {allocations} allocations");
     assert_eq!(summary.stop, StopReason::FrameLimit, "the driver kept sending");
     assert_eq!(counted_frames, COUNTED);

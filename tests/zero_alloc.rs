@@ -10,12 +10,11 @@ use mrsmap::io::camera_file::read_camera;
 use mrsmap::io::frames::FrameLoader;
 use mrsmap::io::tum::TumDataset;
 use mrsmap::odometry::{Odometry, OdometryParams};
-use std::sync::atomic::Ordering;
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;
 
-use common::counting_alloc::{ALLOCATIONS, ARMED, Counting};
+use common::counting_alloc::{Counting, start_counting, stop_counting};
 
 fn allocations_per_frame(half: bool) -> (usize, usize) {
     let camera = read_camera(&fr3_camera_file()).expect("camera");
@@ -46,14 +45,12 @@ fn allocations_per_frame(half: bool) -> (usize, usize) {
     for i in 0..3 {
         step(i);
     }
-    ALLOCATIONS.store(0, Ordering::SeqCst);
-    ARMED.store(true, Ordering::SeqCst);
+    start_counting();
     let n = 3 * frames.len();
     for i in 3..3 + n {
         step(i);
     }
-    ARMED.store(false, Ordering::SeqCst);
-    (ALLOCATIONS.load(Ordering::SeqCst), n)
+    (stop_counting(), n)
 }
 
 #[test]
@@ -63,12 +60,11 @@ fn building_and_registering_allocate_nothing_after_warm_up() {
     {
         use rayon::prelude::*;
         let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().expect("pool");
-        ALLOCATIONS.store(0, Ordering::SeqCst);
-        ARMED.store(true, Ordering::SeqCst);
+        start_counting();
         let total: usize = pool.install(|| (0..64).into_par_iter().map(|i| vec![i; 100].len()).sum());
-        ARMED.store(false, Ordering::SeqCst);
+        let allocations = stop_counting();
         assert_eq!(total, 6400);
-        assert!(ALLOCATIONS.load(Ordering::SeqCst) >= 64, "the counter must see worker allocations");
+        assert!(allocations >= 64, "the counter must see worker allocations");
     }
     for half in [false, true] {
         let (allocations, frames) = allocations_per_frame(half);
