@@ -445,6 +445,8 @@ impl Search<'_> {
 struct CubeCells<'a> {
     model: &'a crate::map::SurfelMap,
     level: usize,
+    /// `level` is the model's coarsest: its cells have no parents.
+    top: bool,
     lo: [i32; 3],
     /// The centre's parent and its neighbours, if it exists.
     parent: Option<&'a [u32; 27]>,
@@ -468,7 +470,7 @@ impl<'a> CubeCells<'a> {
                 octant_part[i][j] = ((k & 1) << (2 - i)) as u8;
             }
         }
-        CubeCells { model, level, lo, parent: parent.map(|p| model.neighbors(p)), neighbor_part, octant_part }
+        CubeCells { model, level, top, lo, parent: parent.map(|p| model.neighbors(p)), neighbor_part, octant_part }
     }
 
     /// The model node of the cell at offset `j` from the cube's low corner.
@@ -483,7 +485,7 @@ impl<'a> CubeCells<'a> {
             }
             None => {
                 let k = [0, 1, 2].map(|i| self.lo[i] + j[i] as i32);
-                if self.level + 1 >= model.num_levels() {
+                if self.top {
                     return model.find(self.level, k);
                 }
                 (model.find(self.level + 1, [k[0] >> 1, k[1] >> 1, k[2] >> 1])?, octant(k))

@@ -60,6 +60,7 @@ impl MatchScratch {
         let r = b_from_a.rotation.to_rotation_matrix().into_inner();
         let t = b_from_a.translation.vector;
         let rf = r.cast::<f32>();
+        let near = NearDirs::new(&rf);
         self.partial.clear();
         self.partial.resize(a.surfels().len().div_ceil(CHUNK), (0.0, 0, 0));
         self.partial.par_iter_mut().zip(a.surfels().par_chunks(CHUNK)).zip(a.normals().par_chunks(CHUNK)).for_each(
@@ -76,7 +77,7 @@ impl MatchScratch {
                     let p = r * s.mean.cast::<f64>() + t;
                     let c = r * s.cov() * r.transpose() + reg;
                     let normal = rf * n;
-                    let best = best_match(b, level, &p, &c, &normal, s.dir, &rf, &reg);
+                    let best = best_match(b, level, &p, &c, &normal, near.of(s.dir), &reg);
                     if best < CHI2_FLOOR {
                         acc.0 += 0.5 * (CHI2_FLOOR - best);
                         acc.1 += 1;
@@ -89,20 +90,45 @@ impl MatchScratch {
     }
 }
 
-/// The smallest Mahalanobis distance to a compatible surfel of `b` near `p`.
-#[allow(clippy::too_many_arguments)]
+/// Per view direction of `a`, the view directions of `b` within 60° of it once rotated
+/// into `b` (a node holds its surfel of direction `k` in slot `k`), in slot order. They
+/// depend on the rotation only.
+struct NearDirs {
+    dirs: [[usize; 6]; 6],
+    len: [usize; 6],
+}
+
+impl NearDirs {
+    fn new(r: &Matrix3<f32>) -> Self {
+        let mut out = NearDirs { dirs: [[0; 6]; 6], len: [0; 6] };
+        for (d, axis) in crate::frame::rays::VIEW_AXES.iter().enumerate() {
+            let view = r * Vector3::new(axis[0], axis[1], axis[2]);
+            for (k, oa) in crate::frame::rays::VIEW_AXES.iter().enumerate() {
+                if view.dot(&Vector3::new(oa[0], oa[1], oa[2])) >= 0.5 {
+                    out.dirs[d][out.len[d]] = k;
+                    out.len[d] += 1;
+                }
+            }
+        }
+        out
+    }
+
+    fn of(&self, dir: u8) -> &[usize] {
+        &self.dirs[dir as usize][..self.len[dir as usize]]
+    }
+}
+
+/// The smallest Mahalanobis distance to a surfel of `b` near `p` in one of the view
+/// directions `dirs` (see [`NearDirs`]).
 fn best_match(
     b: &SurfelMap,
     level: usize,
     p: &Vector3<f64>,
     c: &Matrix3<f64>,
     normal: &Vector3<f32>,
-    dir: u8,
-    r: &Matrix3<f32>,
+    dirs: &[usize],
     reg: &Matrix3<f64>,
 ) -> f64 {
-    let axis = crate::frame::rays::VIEW_AXES[dir as usize];
-    let view = r * Vector3::new(axis[0], axis[1], axis[2]);
     let Some(center) = b.find(level, b.key_of(p, level)).or_else(|| {
         // The cell of p may be empty while a neighbour is not: try the six faces.
         let k = b.key_of(p, level);
@@ -114,21 +140,11 @@ fn best_match(
     }) else {
         return f64::INFINITY;
     };
-    // The view directions of `b` within 60° of the rotated view direction (a node holds
-    // its surfel of direction `k` in slot `k`), in slot order.
-    let mut dirs = [0usize; 6];
-    let mut num_dirs = 0;
-    for (k, oa) in crate::frame::rays::VIEW_AXES.iter().enumerate() {
-        if view.dot(&Vector3::new(oa[0], oa[1], oa[2])) >= 0.5 {
-            dirs[num_dirs] = k;
-            num_dirs += 1;
-        }
-    }
     let mut best = f64::INFINITY;
     let fixed_trace = c.trace() + reg.trace();
     for &m in b.neighbors(center).iter().filter(|&&m| m != NONE) {
         let slots = &b.nodes()[m as usize].surfels;
-        for &sb in dirs[..num_dirs].iter().map(|&k| &slots[k]).filter(|&&s| s != NONE) {
+        for &sb in dirs.iter().map(|&k| &slots[k]).filter(|&&s| s != NONE) {
             let other = &b.surfels()[sb as usize];
             if !other.usable() {
                 continue;
