@@ -174,3 +174,27 @@ fn the_readme_demo_runs_two_processes_and_tracks_every_frame() {
     assert!(out.status.success(), "{text}\n{}", String::from_utf8_lossy(&out.stderr));
     assert!(text.contains("8 poses received, 8 tracking") && text.contains("error vs motion capture"), "{text}");
 }
+
+#[test]
+fn bench_runs_on_the_shipped_clip_with_or_without_the_pose_graph() {
+    let clip = teddy_clip();
+    let camera = fr3_camera_file();
+    for graph in ["0", "2"] {
+        let args = [
+            "bench",
+            "--dataset",
+            path_str(&clip),
+            "--camera",
+            path_str(&camera),
+            "--passes",
+            "1",
+            "--resolution",
+            "qvga",
+        ];
+        let out = mrsmap(&[&args[..], &["--graph-key-views", graph]].concat());
+        assert!(out.status.success(), "--graph-key-views {graph}: {}", String::from_utf8_lossy(&out.stderr));
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(text.contains("QVGA 320×240"), "{text}");
+        assert_eq!(text.contains("pose-graph step"), graph != "0", "{text}");
+    }
+}

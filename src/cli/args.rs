@@ -254,7 +254,8 @@ pub struct BenchArgs {
     /// Image sizes to run.
     #[arg(long, value_enum, value_delimiter = ',', default_value = "vga,qvga")]
     pub resolution: Vec<app::bench::Resolution>,
-    /// Key views of the synthetic pose graph whose optimisation step is also timed.
+    /// Key views of the synthetic pose graph whose optimisation step is also timed
+    /// (0: not timed).
     #[arg(long, default_value_t = 100)]
     pub graph_key_views: usize,
     /// Also time object tracking with this tracker configuration (frames from
