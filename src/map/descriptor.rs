@@ -30,26 +30,25 @@ pub fn descriptor_distance2(a: &Descriptor, b: &Descriptor) -> f32 {
     a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum()
 }
 
-/// Soft-bins a cosine `c ∈ [−1, 1]` into bins centred at −1, 0, +1.
+/// Soft-bins a cosine `c ∈ [−1, 1]` into bins centred at −1, 0, +1. Without branches:
+/// the sign of `c` is not predictable, and the bin not hit receives `w · 0`.
 #[inline]
 fn bin_shape(c: f32, w: f32, out: &mut [f32]) {
     let c = c.clamp(-1.0, 1.0);
-    if c >= 0.0 {
-        out[1] += w * (1.0 - c);
-        out[2] += w * c;
-    } else {
-        out[0] += w * -c;
-        out[1] += w * (1.0 + c);
-    }
+    out[0] += w * (-c).max(0.0);
+    out[1] += w * (1.0 - c.abs());
+    out[2] += w * c.max(0.0);
 }
 
-/// Soft-bins a colour difference into (negative, zero, positive), saturating at `theta`.
+/// Soft-bins a colour difference into (negative, zero, positive), saturating at `theta`
+/// (without branches, as [`bin_shape`]).
 #[inline]
 fn bin_texture(d: f32, theta: f32, w: f32, out: &mut [f32]) {
     let a = (d.abs() / theta).min(1.0);
-    let sign_bin = if d < 0.0 { 0 } else { 2 };
-    out[sign_bin] += w * a;
+    let negative = if d < 0.0 { a } else { 0.0 };
+    out[0] += w * negative;
     out[1] += w * (1.0 - a);
+    out[2] += w * (a - negative);
 }
 
 fn add_pair(

@@ -6,6 +6,7 @@
 //! `key >> 1` (floor division, also for negative keys).
 
 use super::params::MAX_LEVELS;
+use rayon::prelude::*;
 
 /// Marks an absent child, neighbour or surfel.
 pub const NONE: u32 = u32::MAX;
@@ -339,12 +340,18 @@ impl NodeArena {
             let (start, end) = (self.level_start[level] as usize, self.level_end[level] as usize);
             let (coarser, this) = self.neighbors.split_at_mut(start);
             let nodes = &self.nodes;
-            for (i, nb) in (start..end).zip(this[..end - start].iter_mut()) {
-                *nb = neighbors_from_parent(nodes, coarser, i);
-            }
+            this[..end - start].par_chunks_mut(NEIGHBOR_CHUNK).enumerate().for_each(|(c, out)| {
+                for (k, nb) in out.iter_mut().enumerate() {
+                    *nb = neighbors_from_parent(nodes, coarser, start + c * NEIGHBOR_CHUNK + k);
+                }
+            });
         }
     }
 }
+
+/// Nodes per parallel work item of [`NodeArena::establish_neighbors`] (each node's
+/// result depends only on the coarser level, so any split gives the same table).
+const NEIGHBOR_CHUNK: usize = 256;
 
 /// The 27-neighbourhood of node `i` from its parent's neighbourhood.
 fn neighbors_from_parent(nodes: &[Node], coarser_neighbors: &[[u32; 27]], i: usize) -> [u32; 27] {
