@@ -20,6 +20,18 @@ pub const fn neighbor_index(dx: i32, dy: i32, dz: i32) -> usize {
     (9 * (dx + 1) + 3 * (dy + 1) + (dz + 1)) as usize
 }
 
+/// The offset `(dx, dy, dz)` of each entry of a 27-neighbourhood: the inverse of
+/// [`neighbor_index`].
+pub(crate) const NEIGHBOR_OFFSETS: [[i32; 3]; 27] = {
+    let mut out = [[0; 3]; 27];
+    let mut k = 0;
+    while k < 27 {
+        out[k] = [(k / 9) as i32 - 1, ((k / 3) % 3) as i32 - 1, (k % 3) as i32 - 1];
+        k += 1;
+    }
+    out
+};
+
 /// Octant of a key within its parent: `4·(x & 1) + 2·(y & 1) + (z & 1)`.
 #[inline]
 pub const fn octant(key: [i32; 3]) -> usize {
@@ -381,6 +393,14 @@ fn neighbors_from_parent(nodes: &[Node], coarser_neighbors: &[[u32; 27]], i: usi
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn neighbor_offsets_invert_neighbor_index() {
+        for (k, d) in NEIGHBOR_OFFSETS.iter().enumerate() {
+            assert_eq!(neighbor_index(d[0], d[1], d[2]), k);
+        }
+        assert_eq!(NEIGHBOR_OFFSETS[SELF_NEIGHBOR], [0, 0, 0]);
+    }
 
     #[test]
     fn morton_code_orders_children_after_their_parent_prefix() {

@@ -20,8 +20,9 @@ use super::params::RegistrationParams;
 use super::workspace::{Association, NODE_CHUNK, Partial, PassState};
 use crate::frame::rays::VIEW_AXES;
 use crate::geometry::Pose;
+use crate::map::tree::NEIGHBOR_OFFSETS;
 use crate::map::tree::octant;
-use crate::map::{MAX_LEVELS, NONE, Node, SELF_NEIGHBOR, descriptor_distance2};
+use crate::map::{MAX_LEVELS, NONE, Node, SELF_NEIGHBOR, descriptor_distance2, neighbor_index};
 use nalgebra::Vector3;
 use rayon::prelude::*;
 
@@ -138,17 +139,6 @@ impl Finer<'_> {
             .any(|&c| c != NONE && (c as usize) >= self.offset && self.assoc[c as usize - self.offset].covered)
     }
 }
-
-/// The key offset of each entry of a node's 27-neighbourhood (`neighbor_index` order).
-const NEIGHBOR_OFFSETS: [[i32; 3]; 27] = {
-    let mut out = [[0; 3]; 27];
-    let mut k = 0;
-    while k < 27 {
-        out[k] = [(k / 9) as i32 - 1, ((k / 3) % 3) as i32 - 1, (k % 3) as i32 - 1];
-        k += 1;
-    }
-    out
-};
 
 /// A usable scene surfel of the node in work: index, mean, transformed mean.
 type Transformed = (u32, Vector3<f64>, Vector3<f64>);
@@ -463,11 +453,16 @@ impl<'a> CubeCells<'a> {
         let mut neighbor_part = [[0u8; 5]; 3];
         let mut octant_part = [[0u8; 5]; 3];
         for i in 0..3 {
-            let weight = [9, 3, 1][i];
             for j in 0..n[i] {
                 let k = lo[i] + j as i32;
-                neighbor_part[i][j] = (weight * ((k >> 1) - (k0[i] >> 1) + 1)) as u8;
-                octant_part[i][j] = ((k & 1) << (2 - i)) as u8;
+                // The other axes at offset −1 and key 0 add nothing to either sum.
+                let d = (k >> 1) - (k0[i] >> 1);
+                let (neighbor, bit) = match i {
+                    0 => (neighbor_index(d, -1, -1), octant([k, 0, 0])),
+                    1 => (neighbor_index(-1, d, -1), octant([0, k, 0])),
+                    _ => (neighbor_index(-1, -1, d), octant([0, 0, k])),
+                };
+                (neighbor_part[i][j], octant_part[i][j]) = (neighbor as u8, bit as u8);
             }
         }
         CubeCells { model, level, top, lo, parent: parent.map(|p| model.neighbors(p)), neighbor_part, octant_part }
