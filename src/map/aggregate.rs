@@ -19,7 +19,6 @@ use super::region::PixelGate;
 use super::stats::{PACKED6, SurfelStats};
 use crate::frame::{PixelRay, RgbdFrame};
 use crate::geometry::color::rgb8_to_lab;
-use std::sync::atomic::{AtomicU8, Ordering};
 
 use super::border::{FOREGROUND_BORDER, VIRTUAL_BORDER};
 use super::tree::NONE;
@@ -105,7 +104,7 @@ pub(crate) struct Placement<'a> {
 pub(crate) struct AggregationInput<'a> {
     pub frame: &'a RgbdFrame<'a>,
     pub rays: &'a [PixelRay],
-    pub flags: &'a [AtomicU8],
+    pub flags: &'a [u8],
     /// Squared range at which the target level steps up (see `MapParams`).
     pub level_thresholds_r2: [f32; MAX_LEVELS],
     /// `1 / resolution` per level.
@@ -232,7 +231,7 @@ impl Band {
         {
             return (NO_CELL, NONE);
         }
-        let flags = input.flags[idx].load(Ordering::Relaxed);
+        let flags = input.flags[idx];
         let mut dirs = if input.smooth_view_dirs { ray.near_dirs } else { 1 << ray.best_dir };
         let mut near_dirs = ray.near_dirs;
         if let Some(pl) = &input.placement {

@@ -3,14 +3,13 @@
 use super::SurfelMap;
 use super::aggregate::{AggregationInput, BAND_ROWS, Band, Placement};
 use super::assemble::Assembly;
-use super::border::mark_borders;
+use super::border::{BorderScratch, mark_borders};
 use super::params::{MAX_LEVELS, MapParams};
 use super::region::ImageRegion;
 use crate::frame::{FrameError, RayTable, RgbdFrame};
 use crate::geometry::{CameraError, Pose};
 use nalgebra::Vector3;
 use rayon::prelude::*;
-use std::sync::atomic::{AtomicU8, Ordering};
 use thiserror::Error;
 
 /// Why a map could not be built from a frame.
@@ -80,7 +79,8 @@ pub struct MapBuilder {
     max_width: usize,
     max_height: usize,
     rays: RayTable,
-    flags: Vec<AtomicU8>,
+    flags: Vec<u8>,
+    borders: BorderScratch,
     bands: Vec<Band>,
     active_bands: usize,
     assembly: Assembly,
@@ -99,7 +99,8 @@ impl MapBuilder {
             max_width,
             max_height,
             rays: RayTable::with_capacity(pixels),
-            flags: (0..pixels).map(|_| AtomicU8::new(0)).collect(),
+            flags: vec![0; pixels],
+            borders: BorderScratch::new(max_width, max_height),
             bands,
             active_bands: 0,
             assembly: Assembly::with_capacity(aggregate_capacity, surfel_capacity),
@@ -176,18 +177,9 @@ impl MapBuilder {
         self.rays.ensure(&frame.camera)?;
         let (rows, cols) = region.clipped(width, height);
         self.configure_bands(width, rows.clone());
-        let flags = &self.flags[..width * height];
-        let region_flags = &flags[rows.start * width..rows.end * width];
-        region_flags.par_chunks(4096).for_each(|c| c.iter().for_each(|f| f.store(0, Ordering::Relaxed)));
-        let jump = params.depth_jump_ratio as f32;
-        mark_borders(frame.depth, self.rays.rays(), width, (rows, cols.clone()), flags, jump);
-        if !params.mark_foreground_borders {
-            region_flags.par_chunks(4096).for_each(|c| {
-                c.iter().for_each(|f| {
-                    f.fetch_and(!super::border::FOREGROUND_BORDER, Ordering::Relaxed);
-                })
-            });
-        }
+        let flags = &mut self.flags[..width * height];
+        mark_borders(frame.depth, self.rays.rays(), width, (rows, cols.clone()), flags, params, &mut self.borders);
+        let flags = &*flags;
         let mut inv_resolution = [0.0f32; MAX_LEVELS];
         for (l, inv) in inv_resolution.iter_mut().enumerate().take(params.num_levels) {
             *inv = (1.0 / params.resolution(l)) as f32;
