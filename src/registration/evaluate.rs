@@ -124,7 +124,9 @@ pub(crate) fn interpolate(model: &SurfelMap, node: u32, surfel: u32, p: &Vector3
     }
     let step = off.map(|o| if o >= 0.0 { 1 } else { -1 });
     let row = model.surfel_neighbors(surfel);
-    let (mut sw, mut mean, mut cov) = (0.0, Vector3::zeros(), Matrix3::zeros());
+    // The covariance is symmetric: its six distinct entries are blended (packed as
+    // `Surfel::cov_packed`), the same sums as the full matrix's.
+    let (mut sw, mut mean, mut cov) = (0.0, Vector3::zeros(), [0.0f64; 6]);
     let mut cells: [(f64, Vector3<f64>, Vector3<f64>); 8] = [(0.0, Vector3::zeros(), Vector3::zeros()); 8];
     let mut n = 0;
     for dx in [0, step.x] {
@@ -142,7 +144,9 @@ pub(crate) fn interpolate(model: &SurfelMap, node: u32, surfel: u32, p: &Vector3
                     let mu = sf.mean.cast::<f64>();
                     sw += w;
                     mean += mu * w;
-                    cov += sf.cov() * w;
+                    for (c, &v) in cov.iter_mut().zip(&sf.cov_packed) {
+                        *c += v as f64 * w;
+                    }
                     // ∂w/∂p: each factor 1 − |r| falls by sign(r)/res along its axis.
                     let grad =
                         Vector3::new(-r.x.signum() * f.y * f.z, -r.y.signum() * f.x * f.z, -r.z.signum() * f.x * f.y)
@@ -158,7 +162,8 @@ pub(crate) fn interpolate(model: &SurfelMap, node: u32, surfel: u32, p: &Vector3
     }
     let mean = mean / sw;
     let jacobian = cells[..n].iter().map(|(_, mu, grad)| (mu - mean) * grad.transpose()).sum::<Matrix3<f64>>() / sw;
-    Interpolated { mean, cov: cov / sw, jacobian }
+    let [xx, xy, xz, yy, yz, zz] = cov.map(|c| c / sw);
+    Interpolated { mean, cov: Matrix3::new(xx, xy, xz, xy, yy, yz, xz, yz, zz), jacobian }
 }
 
 /// The slot of every (level, chunk) pair: levels from `finest` to `coarsest`, chunks of
