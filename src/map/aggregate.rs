@@ -192,17 +192,17 @@ impl Band {
     }
 
     /// The aggregate of the same cell among the pixel's already visited neighbours
-    /// (above-left, above, above-right, left), `NONE` if there is none (§3.3).
+    /// (above-left, above, above-right, left) within the columns `cols`, `NONE` if
+    /// there is none (§3.3). (Outside `cols` the row buffers hold older rows' cells.)
     #[inline(always)]
-    fn neighbour_aggregate(&self, u: usize, first_row: bool, packed: u64) -> u32 {
-        let width = self.cur.len();
+    fn neighbour_aggregate(&self, u: usize, cols: &std::ops::Range<usize>, first_row: bool, packed: u64) -> u32 {
         if !first_row && self.prev[u].0 == packed {
             self.prev[u].1
-        } else if !first_row && u > 0 && self.prev[u - 1].0 == packed {
+        } else if !first_row && u > cols.start && self.prev[u - 1].0 == packed {
             self.prev[u - 1].1
-        } else if !first_row && u + 1 < width && self.prev[u + 1].0 == packed {
+        } else if !first_row && u + 1 < cols.end && self.prev[u + 1].0 == packed {
             self.prev[u + 1].1
-        } else if u > 0 && self.cur[u - 1].0 == packed {
+        } else if u > cols.start && self.cur[u - 1].0 == packed {
             self.cur[u - 1].1
         } else {
             NONE
@@ -252,7 +252,7 @@ impl Band {
         let inv = input.inv_resolution[level];
         let key = [floor_i32(x * inv), floor_i32(y * inv), floor_i32(z * inv)];
         let packed = pack(level, key);
-        let joined = self.neighbour_aggregate(u, first_row, packed);
+        let joined = self.neighbour_aggregate(u, &input.cols, first_row, packed);
         let rgb = &input.frame.rgb[3 * idx..3 * idx + 3];
         let [l, a, b] = rgb8_to_lab(rgb[0], rgb[1], rgb[2]);
         let point = [x, y, z, l, a, b];

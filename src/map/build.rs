@@ -10,6 +10,7 @@ use crate::frame::{FrameError, RayTable, RgbdFrame};
 use crate::geometry::{CameraError, Pose};
 use nalgebra::Vector3;
 use rayon::prelude::*;
+use std::ops::Range;
 use thiserror::Error;
 
 /// Why a map could not be built from a frame.
@@ -175,8 +176,8 @@ impl MapBuilder {
             });
         }
         self.rays.ensure(&frame.camera)?;
-        let (rows, cols) = region.clipped(width, height);
-        self.configure_bands(width, rows.clone());
+        let ((rows, cols), (point_rows, point_cols)) = region.clipped(width, height);
+        self.configure_bands(width, rows.clone(), &point_rows);
         let flags = &mut self.flags[..width * height];
         mark_borders(frame.depth, self.rays.rays(), width, (rows, cols.clone()), flags, params, &mut self.borders);
         let flags = &*flags;
@@ -193,20 +194,23 @@ impl MapBuilder {
             num_levels: params.num_levels,
             smooth_view_dirs: params.smooth_view_dirs,
             placement,
-            cols,
+            cols: point_cols,
             gate: region.gate.as_ref(),
         };
         self.bands[..self.active_bands].par_iter_mut().for_each(|b| b.aggregate(&input));
         Ok(())
     }
 
-    /// Cuts `rows` into bands of `BAND_ROWS` from its first row. Band `b` was sized for
+    /// Cuts `rows` into bands of `BAND_ROWS` from its first row, each aggregating its
+    /// rows within `point_rows` (the others give no points). Band `b` was sized for
     /// rows `b·BAND_ROWS..` of the largest image, and gets no more rows than that.
-    fn configure_bands(&mut self, width: usize, rows: std::ops::Range<usize>) {
+    fn configure_bands(&mut self, width: usize, rows: Range<usize>, point_rows: &Range<usize>) {
         self.active_bands = rows.len().div_ceil(BAND_ROWS);
         for (b, band) in self.bands.iter_mut().enumerate().take(self.active_bands) {
             let start = rows.start + b * BAND_ROWS;
-            band.configure(start..(start + BAND_ROWS).min(rows.end), width);
+            let end = (start + BAND_ROWS).min(rows.end);
+            let first = start.max(point_rows.start);
+            band.configure(first..end.min(point_rows.end).max(first), width);
         }
     }
 }
@@ -220,5 +224,65 @@ fn report(bands: &[Band], map: &SurfelMap, dropped: super::assemble::Dropped) ->
         dropped_points: bands.iter().map(|b| b.dropped_points as u64).sum(),
         dropped_aggregates: dropped.aggregates,
         dropped_surfels: dropped.surfels,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::{CameraModel, PinholeIntrinsics};
+    use crate::map::MapCapacity;
+
+    /// A slanted wall with a colour ramp: neighbouring rows share cells.
+    fn wall(camera: &CameraModel) -> (Vec<u8>, Vec<u16>) {
+        let (w, h) = (camera.width as usize, camera.height as usize);
+        let depth = (0..w * h).map(|i| 15000 + (i % w) as u16 * 8).collect();
+        let rgb = (0..w * h).flat_map(|i| [(i % w / 3) as u8, 90, (i / w / 2) as u8]).collect();
+        (rgb, depth)
+    }
+
+    fn region(
+        rows: Range<usize>,
+        cols: Range<usize>,
+        point_rows: Range<usize>,
+        point_cols: Range<usize>,
+    ) -> ImageRegion {
+        ImageRegion { rows, cols, point_rows, point_cols, gate: None }
+    }
+
+    #[test]
+    fn a_region_map_depends_neither_on_earlier_frames_nor_on_the_margin_s_points() {
+        let camera = CameraModel {
+            width: 320,
+            height: 240,
+            intrinsics: PinholeIntrinsics { fx: 268.0, fy: 270.0, cx: 160.0, cy: 124.0 },
+            distortion: [0.0; 5],
+            depth_scale_m: 0.0002,
+        };
+        let (rgb, depth) = wall(&camera);
+        let frame = RgbdFrame::new(0, camera, &rgb, &depth).expect("consistent frame");
+        let capacity = MapCapacity::for_image(320 * 240);
+        let new_map = || SurfelMap::new(MapParams::default(), capacity).expect("valid parameters");
+        let surfels =
+            |map: &SurfelMap| map.surfels().iter().map(|s| (s.node, s.dir, s.count, s.mean)).collect::<Vec<_>>();
+        // A builder that has seen other regions of the frame before…
+        let mut used = MapBuilder::new(320, 240, capacity.surfels);
+        let mut map = new_map();
+        used.build(&frame, &mut map).expect("builds");
+        used.build_region(&frame, &region(40..200, 30..300, 40..200, 30..300), &mut map).expect("builds");
+        used.build_region(&frame, &region(40..200, 60..250, 40..200, 60..250), &mut map).expect("builds");
+        // …builds the same map as a fresh one.
+        let mut fresh = MapBuilder::new(320, 240, capacity.surfels);
+        let mut expected = new_map();
+        fresh.build_region(&frame, &region(40..200, 60..250, 40..200, 60..250), &mut expected).expect("builds");
+        assert!(!expected.surfels().is_empty());
+        assert_eq!(surfels(&map), surfels(&expected));
+        // Points come only from the point rows and columns; the margin around them
+        // still counts as inside the region for border detection.
+        let mut margin = new_map();
+        fresh.build_region(&frame, &region(30..210, 50..260, 40..200, 60..250), &mut margin).expect("builds");
+        let points = |map: &SurfelMap| map.surfels().iter().filter(|s| s.level == 0).map(|s| s.count).sum::<f32>();
+        assert_eq!(points(&margin), points(&expected));
+        assert_ne!(surfels(&margin), surfels(&expected), "the region's edges are borders: the margin moves them");
     }
 }

@@ -99,20 +99,36 @@ pub struct ImageRegion {
     pub rows: Range<usize>,
     /// Image columns `u`.
     pub cols: Range<usize>,
+    /// The rows, within `rows`, whose pixels may give points. The region's edges count
+    /// as image borders (§3.4); a margin of rows and columns around those that give
+    /// points keeps them away from the object and serves border detection only.
+    pub point_rows: Range<usize>,
+    /// The columns, within `cols`, whose pixels may give points.
+    pub point_cols: Range<usize>,
     /// A gate on the pixels' points, if any.
     pub gate: Option<PixelGate>,
 }
 
+/// Rows and columns of an image region.
+pub type PixelRect = (Range<usize>, Range<usize>);
+
 impl ImageRegion {
     /// The whole image, no gate.
     pub fn whole(width: usize, height: usize) -> Self {
-        ImageRegion { rows: 0..height, cols: 0..width, gate: None }
+        ImageRegion { rows: 0..height, cols: 0..width, point_rows: 0..height, point_cols: 0..width, gate: None }
     }
 
-    /// The region clipped to an image of `width × height` (empty ranges stay empty).
-    pub fn clipped(&self, width: usize, height: usize) -> (Range<usize>, Range<usize>) {
+    /// The region and the part of it that may give points, clipped to an image of
+    /// `width × height` (empty ranges stay empty).
+    pub fn clipped(&self, width: usize, height: usize) -> (PixelRect, PixelRect) {
         let clip = |r: &Range<usize>, n: usize| r.start.min(n)..r.end.min(n).max(r.start.min(n));
-        (clip(&self.rows, height), clip(&self.cols, width))
+        let within = |inner: &Range<usize>, outer: &Range<usize>| {
+            let start = inner.start.clamp(outer.start, outer.end);
+            start..inner.end.clamp(start, outer.end)
+        };
+        let (rows, cols) = (clip(&self.rows, height), clip(&self.cols, width));
+        let points = (within(&self.point_rows, &rows), within(&self.point_cols, &cols));
+        ((rows, cols), points)
     }
 }
 
@@ -144,7 +160,9 @@ mod tests {
 
     #[test]
     fn regions_clip_to_the_image() {
-        let r = ImageRegion { rows: 100..900, cols: 700..800, gate: None };
-        assert_eq!(r.clipped(640, 480), (100..480, 640..640));
+        let r = ImageRegion { rows: 100..900, cols: 700..800, point_rows: 50..200, point_cols: 710..790, gate: None };
+        assert_eq!(r.clipped(640, 480), ((100..480, 640..640), (100..200, 640..640)));
+        let r = ImageRegion { rows: 10..100, cols: 20..200, point_rows: 30..60, point_cols: 40..250, gate: None };
+        assert_eq!(r.clipped(640, 480), ((10..100, 20..200), (30..60, 40..200)));
     }
 }

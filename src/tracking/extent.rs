@@ -24,6 +24,10 @@ pub enum ExtentError {
     },
 }
 
+/// Slack (pixels) around the image of the gate within which pixels may give points:
+/// far beyond the rounding errors of the single-precision gate and of the bounds.
+const POINT_BOUNDS_SLACK_PX: f64 = 2.0;
+
 /// The spatial distribution of a model's points (its root statistics) and its volume
 /// of interest, in the object frame.
 #[derive(Debug, Clone, PartialEq)]
@@ -153,7 +157,7 @@ impl ModelExtent {
             );
             let c = camera_from_object * p;
             if c.z < 0.05 {
-                return ImageRegion { rows: 0..h, cols: 0..w, gate: Some(gate) };
+                return ImageRegion { gate: Some(gate), ..ImageRegion::whole(w, h) };
             }
             let (u, v) = (k.fx * c.x / c.z + k.cx, k.fy * c.y / c.z + k.cy);
             (u_min, u_max, v_min, v_max) = (u_min.min(u), u_max.max(u), v_min.min(v), v_max.max(v));
@@ -166,9 +170,21 @@ impl ModelExtent {
         }
         let m = params.region_margin_px;
         let clamp = |x: f64, n: usize| x.clamp(0.0, n as f64) as usize;
-        let cols = clamp((u_min - m).floor(), w)..clamp((u_max + m).ceil() + 1.0, w);
-        let rows = clamp((v_min - m).floor(), h)..clamp((v_max + m).ceil() + 1.0, h);
-        ImageRegion { rows, cols, gate: Some(gate) }
+        let span = |lo: f64, hi: f64, margin: f64, n: usize| {
+            clamp((lo - margin).floor(), n)..clamp((hi + margin).ceil() + 1.0, n)
+        };
+        let (cols, rows) = (span(u_min, u_max, m, w), span(v_min, v_max, m, h));
+        // Only pixels within the bounds can give points the gate keeps (their rays meet
+        // the gate's box and ellipsoid); the margin serves border detection. The bounds
+        // are those of the pinhole image: with lens distortion every pixel of the region
+        // may give points.
+        let (point_rows, point_cols) = if camera.is_distorted() {
+            (rows.clone(), cols.clone())
+        } else {
+            let s = POINT_BOUNDS_SLACK_PX.min(m.max(0.0));
+            (span(v_min, v_max, s, h), span(u_min, u_max, s, w))
+        };
+        ImageRegion { rows, cols, point_rows, point_cols, gate: Some(gate) }
     }
 }
 

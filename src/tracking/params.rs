@@ -19,7 +19,9 @@ pub struct TrackerParams {
     /// original: 8 · 1.5 = 12 within 3 m).
     pub gate_mahalanobis2: f64,
     /// The image region processed is the image of the gate (its box and ellipsoid), grown by
-    /// this many pixels on each side for the motion the prediction misses.
+    /// this many pixels on each side. The region's edges count as image borders (§3.4);
+    /// the margin keeps them off the object and serves border detection only (the gate
+    /// keeps no points there).
     pub region_margin_px: f64,
     /// A registration counts as good when its quality (the matching log-likelihood per
     /// scene surfel, normalised: see [`super::PoseEstimate::quality`]) is at least this.
