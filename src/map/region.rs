@@ -25,7 +25,30 @@ pub enum GateVolume {
         /// Half extents.
         half_extents: [f32; 3],
     },
+    /// A prism's polygon test (even–odd rule) reduced to the edges that matter for the
+    /// points within a box, whose heights the box already limits to the prism's:
+    /// points outside the box are never tested. Built by [`GateVolume::for_points_within`].
+    PolygonEdges {
+        /// The edges that a point within the box can straddle, and whether it is
+        /// always left of them (then straddling alone decides the crossing).
+        edges: heapless::Vec<PolygonEdge, MAX_GATE_CORNERS>,
+    },
 }
+
+/// An edge of a prism's polygon, from `a` to `b`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PolygonEdge {
+    /// One end (object frame, m).
+    pub a: [f32; 2],
+    /// The other end.
+    pub b: [f32; 2],
+    /// Every point within the box that straddles the edge lies left of it.
+    pub always_left: bool,
+}
+
+/// How far (m) an edge must lie beyond the box for its crossing test to be decided
+/// without computing it: far beyond the rounding error of that test.
+const EDGE_SLACK_M: f32 = 1e-3;
 
 impl GateVolume {
     /// Whether a point in object coordinates is inside.
@@ -36,18 +59,74 @@ impl GateVolume {
                 p.z >= *min_z && p.z <= *max_z && point_in_polygon(polygon, p.x, p.y)
             }
             GateVolume::Box { half_extents } => (0..3).all(|i| p[i].abs() <= half_extents[i]),
+            GateVolume::PolygonEdges { edges } => edges.iter().fold(false, |inside, e| {
+                inside ^ (straddles(e.a, e.b, p.y) && (e.always_left || left_of(e.a, e.b, p.x, p.y)))
+            }),
+        }
+    }
+
+    /// The box `lo ..= hi` narrowed by this volume's box, and the volume test that,
+    /// after it, decides the same for every point as this one — or `None` if the box
+    /// decides alone. The same single-precision comparisons narrow the box; a prism's
+    /// polygon keeps only the edges that a point within the box can straddle and lie left of, marked
+    /// when such a point always lies left of them (by more than `EDGE_SLACK_M`, far
+    /// beyond the test's rounding).
+    pub fn for_points_within(
+        &self,
+        lo: &Vector3<f32>,
+        hi: &Vector3<f32>,
+    ) -> ((Vector3<f32>, Vector3<f32>), Option<Self>) {
+        let (mut lo, mut hi) = (*lo, *hi);
+        match self {
+            GateVolume::Box { half_extents } => {
+                for i in 0..3 {
+                    (lo[i], hi[i]) = (lo[i].max(-half_extents[i]), hi[i].min(half_extents[i]));
+                }
+                ((lo, hi), None)
+            }
+            GateVolume::Prism { polygon, min_z, max_z } => {
+                (lo.z, hi.z) = (lo.z.max(*min_z), hi.z.min(*max_z));
+                let mut edges = heapless::Vec::new();
+                let Some(&last) = polygon.last() else { return ((lo, hi), Some(self.clone())) };
+                let mut b = last;
+                for &a in polygon {
+                    // Straddled by no y within the box: `a₁ > y` and `b₁ > y` agree.
+                    let never_straddled =
+                        a[1] == b[1] || (a[1] > hi.y && b[1] > hi.y) || (a[1] <= lo.y && b[1] <= lo.y);
+                    let left_of_box = a[0].max(b[0]) + EDGE_SLACK_M < lo.x;
+                    if !never_straddled && !left_of_box {
+                        let always_left = a[0].min(b[0]) - EDGE_SLACK_M > hi.x;
+                        let _ = edges.push(PolygonEdge { a, b, always_left });
+                    }
+                    b = a;
+                }
+                ((lo, hi), Some(GateVolume::PolygonEdges { edges }))
+            }
+            GateVolume::PolygonEdges { .. } => ((lo, hi), Some(self.clone())),
         }
     }
 }
 
+/// Whether a horizontal line at `y` separates the edge's ends (even–odd rule).
+#[inline(always)]
+fn straddles<T: nalgebra::RealField + Copy>(a: [T; 2], b: [T; 2], y: T) -> bool {
+    (a[1] > y) != (b[1] > y)
+}
+
+/// Whether `(x, y)` lies left of the edge where it straddles `y` (even–odd rule).
+#[inline(always)]
+fn left_of<T: nalgebra::RealField + Copy>(a: [T; 2], b: [T; 2], x: T, y: T) -> bool {
+    x < (b[0] - a[0]) * (y - a[1]) / (b[1] - a[1]) + a[0]
+}
+
 /// Even–odd rule.
 #[inline]
-fn point_in_polygon(polygon: &[[f32; 2]], x: f32, y: f32) -> bool {
+fn point_in_polygon<T: nalgebra::RealField + Copy>(polygon: &[[T; 2]], x: T, y: T) -> bool {
     let mut inside = false;
     let Some(&last) = polygon.last() else { return false };
     let mut b = last;
     for &a in polygon {
-        if (a[1] > y) != (b[1] > y) && x < (b[0] - a[0]) * (y - a[1]) / (b[1] - a[1]) + a[0] {
+        if straddles(a, b, y) && left_of(a, b, x, y) {
             inside = !inside;
         }
         b = a;
@@ -81,7 +160,7 @@ impl PixelGate {
     pub fn keeps(&self, p: &Vector3<f32>) -> bool {
         let q = self.rotation * p + self.translation;
         let (lo, hi) = &self.bounds;
-        if q.x < lo.x || q.y < lo.y || q.z < lo.z || q.x > hi.x || q.y > hi.y || q.z > hi.z {
+        if !(q.x >= lo.x && q.y >= lo.y && q.z >= lo.z && q.x <= hi.x && q.y <= hi.y && q.z <= hi.z) {
             return false;
         }
         let d = q - self.mean;
@@ -156,6 +235,72 @@ mod tests {
         assert!(!gate.keeps(&Vector3::new(0.0, 0.0, 1.0)), "on the support plane: below min_z");
         assert!(!gate.keeps(&Vector3::new(0.25, 0.0, 1.1)), "outside the footprint");
         assert!(!gate.keeps(&Vector3::new(0.0, 0.0, 1.45)), "3.5 σ from the mean");
+    }
+
+    #[test]
+    fn volumes_planned_for_a_box_decide_as_the_box_and_the_volume() {
+        let poly = |c: &[[f32; 2]]| heapless::Vec::from_slice(c).expect("fits");
+        let volumes = [
+            GateVolume::Prism {
+                polygon: poly(&[[-0.3, -0.245], [0.3, -0.245], [0.3, 0.245], [-0.3, 0.245]]),
+                min_z: 0.015,
+                max_z: 0.6,
+            },
+            GateVolume::Prism {
+                polygon: poly(&[[0.0, -0.4], [0.35, 0.0], [0.0, 0.3], [-0.3, 0.05]]),
+                min_z: -0.1,
+                max_z: 0.2,
+            },
+            // Concave, with a horizontal edge and a notch inside the box.
+            GateVolume::Prism {
+                polygon: poly(&[
+                    [-0.3, -0.3],
+                    [0.3, -0.3],
+                    [0.3, 0.3],
+                    [0.05, 0.3],
+                    [0.0, -0.1],
+                    [-0.05, 0.3],
+                    [-0.3, 0.3],
+                ]),
+                min_z: 0.0,
+                max_z: 1.0,
+            },
+            GateVolume::Box { half_extents: [0.2, 0.25, 0.3] },
+        ];
+        let boxes = [
+            (Vector3::new(-0.29, -0.256, -0.05), Vector3::new(0.226, 0.19, 0.57)),
+            (Vector3::new(-0.5, -0.5, -0.5), Vector3::new(0.5, 0.5, 0.5)),
+            (Vector3::new(0.1, 0.1, 0.1), Vector3::new(0.2, 0.15, 0.3)),
+        ];
+        let inside =
+            |q: &Vector3<f32>, lo: &Vector3<f32>, hi: &Vector3<f32>| (0..3).all(|i| q[i] >= lo[i] && q[i] <= hi[i]);
+        let mut state = 7u64;
+        let mut random = move || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((state >> 40) as f32 / (1u64 << 24) as f32) * 1.4 - 0.7
+        };
+        for volume in &volumes {
+            for (lo, hi) in &boxes {
+                let ((lo2, hi2), planned) = volume.for_points_within(lo, hi);
+                for _ in 0..20_000 {
+                    let q = Vector3::new(random(), random(), random());
+                    let before = inside(&q, lo, hi) && volume.contains(&q);
+                    let after = inside(&q, &lo2, &hi2) && planned.as_ref().is_none_or(|v| v.contains(&q));
+                    assert_eq!(before, after, "{volume:?} within {lo:?}..{hi:?} at {q:?}");
+                }
+                // Points on the vertices' heights and the box's faces.
+                if let GateVolume::Prism { polygon, .. } = volume {
+                    for c in polygon.iter() {
+                        for x in [lo.x, hi.x, c[0], 0.0] {
+                            let q = Vector3::new(x, c[1], 0.1);
+                            let before = inside(&q, lo, hi) && volume.contains(&q);
+                            let after = inside(&q, &lo2, &hi2) && planned.as_ref().is_none_or(|v| v.contains(&q));
+                            assert_eq!(before, after, "{volume:?} at {q:?}");
+                        }
+                    }
+                }
+            }
+        }
     }
 
     #[test]

@@ -35,7 +35,11 @@ pub struct ModelExtent {
     mean: Vector3<f64>,
     covariance: Matrix3<f64>,
     inverse_covariance: Matrix3<f64>,
-    volume: Option<GateVolume>,
+    /// The gate's box (object frame, single precision): `bounds` narrowed by the
+    /// volume's box (see [`GateVolume::for_points_within`]).
+    gate_bounds: (Vector3<f32>, Vector3<f32>),
+    /// The gate's volume test, if the box does not already decide it.
+    gate_volume: Option<GateVolume>,
     /// Bounding box of the volume (object frame), if any.
     volume_box: Option<(Vector3<f64>, Vector3<f64>)>,
     /// Bounding box of the model's surfels (object frame), grown by a margin.
@@ -75,7 +79,12 @@ impl ModelExtent {
                 (Some(GateVolume::Box { half_extents: half_extents.map(|v| v as f32) }), Some((-h, h)))
             }
         };
-        Ok(ModelExtent { mean, covariance, inverse_covariance, volume, volume_box, bounds })
+        let (lo, hi) = (bounds.0.cast(), bounds.1.cast());
+        let (gate_bounds, gate_volume) = match &volume {
+            Some(v) => v.for_points_within(&lo, &hi),
+            None => ((lo, hi), None),
+        };
+        Ok(ModelExtent { mean, covariance, inverse_covariance, gate_bounds, gate_volume, volume_box, bounds })
     }
 
     /// The gate at `object_from_camera`: points inside the volume and within
@@ -87,8 +96,8 @@ impl ModelExtent {
             mean: self.mean.cast(),
             inverse_covariance: self.inverse_covariance.cast(),
             max_mahalanobis2: max_mahalanobis2 as f32,
-            volume: self.volume.clone(),
-            bounds: (self.bounds.0.cast(), self.bounds.1.cast()),
+            volume: self.gate_volume.clone(),
+            bounds: self.gate_bounds,
         }
     }
 
