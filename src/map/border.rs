@@ -147,12 +147,13 @@ pub(crate) fn mark_borders(
     if width == 0 {
         return;
     }
+    let jump = params.depth_jump_ratio as f32;
     let input = ScanInput {
         depth,
         rays,
         width,
         cols: cols.clone(),
-        jump2: (params.depth_jump_ratio as f32).powi(2),
+        jump2: jump * jump,
         foreground: if params.mark_foreground_borders { FOREGROUND_BORDER } else { 0 },
     };
     let region_flags = &mut flags[rows.start * width..rows.end * width];
