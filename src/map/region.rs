@@ -67,10 +67,10 @@ impl GateVolume {
 
     /// The box `lo ..= hi` narrowed by this volume's box, and the volume test that,
     /// after it, decides the same for every point as this one — or `None` if the box
-    /// decides alone. The same single-precision comparisons narrow the box; a prism's
-    /// polygon keeps only the edges that a point within the box can straddle and lie left of, marked
-    /// when such a point always lies left of them (by more than `EDGE_SLACK_M`, far
-    /// beyond the test's rounding).
+    /// decides alone. The same single-precision comparisons narrow the box. Of a prism's
+    /// polygon only the edges remain that a point within the box can straddle and lie
+    /// left of; an edge that every such point lies left of (by more than
+    /// `EDGE_SLACK_M`, far beyond the test's rounding) is decided by straddling alone.
     pub fn for_points_within(
         &self,
         lo: &Vector3<f32>,
