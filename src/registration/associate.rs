@@ -58,8 +58,9 @@ impl DirCandidates {
         out
     }
 
+    /// The model view directions for scene view direction `dir`, best first.
     #[inline]
-    fn of(&self, dir: u8) -> &[u8] {
+    pub(crate) fn of(&self, dir: u8) -> &[u8] {
         &self.dirs[dir as usize][..self.len[dir as usize] as usize]
     }
 }

@@ -8,6 +8,7 @@
 //! floor of an unmatched surfel at `m² = χ²_floor`: `max(0, ½(χ²_floor − m²))`. A perfect
 //! match of a surfel with itself scores about `½(χ²_floor − 3)`; an unrelated map ≈ 0.
 
+use super::associate::DirCandidates;
 use crate::geometry::Pose;
 use crate::map::{NONE, SurfelMap};
 use nalgebra::{Matrix3, Vector3};
@@ -60,7 +61,7 @@ impl MatchScratch {
         let r = b_from_a.rotation.to_rotation_matrix().into_inner();
         let t = b_from_a.translation.vector;
         let rf = r.cast::<f32>();
-        let near = NearDirs::new(&rf);
+        let near = DirCandidates::new(b_from_a, VIEW_DIR_MIN_COS);
         self.partial.clear();
         self.partial.resize(a.surfels().len().div_ceil(CHUNK), (0.0, 0, 0));
         self.partial.par_iter_mut().zip(a.surfels().par_chunks(CHUNK)).zip(a.normals().par_chunks(CHUNK)).for_each(
@@ -90,43 +91,19 @@ impl MatchScratch {
     }
 }
 
-/// Per view direction of `a`, the view directions of `b` within 60° of it once rotated
-/// into `b` (a node holds its surfel of direction `k` in slot `k`), in slot order. They
-/// depend on the rotation only.
-struct NearDirs {
-    dirs: [[usize; 6]; 6],
-    len: [usize; 6],
-}
-
-impl NearDirs {
-    fn new(r: &Matrix3<f32>) -> Self {
-        let mut out = NearDirs { dirs: [[0; 6]; 6], len: [0; 6] };
-        for (d, axis) in crate::frame::rays::VIEW_AXES.iter().enumerate() {
-            let view = r * Vector3::new(axis[0], axis[1], axis[2]);
-            for (k, oa) in crate::frame::rays::VIEW_AXES.iter().enumerate() {
-                if view.dot(&Vector3::new(oa[0], oa[1], oa[2])) >= 0.5 {
-                    out.dirs[d][out.len[d]] = k;
-                    out.len[d] += 1;
-                }
-            }
-        }
-        out
-    }
-
-    fn of(&self, dir: u8) -> &[usize] {
-        &self.dirs[dir as usize][..self.len[dir as usize]]
-    }
-}
+/// A surfel of `a` is compared with the surfels of `b` whose view directions lie
+/// within 60° of its own once rotated into `b` (as association, §4.1).
+const VIEW_DIR_MIN_COS: f64 = 0.5;
 
 /// The smallest Mahalanobis distance to a surfel of `b` near `p` in one of the view
-/// directions `dirs` (see [`NearDirs`]).
+/// directions `dirs` (slots of `b`'s nodes).
 fn best_match(
     b: &SurfelMap,
     level: usize,
     p: &Vector3<f64>,
     c: &Matrix3<f64>,
     normal: &Vector3<f32>,
-    dirs: &[usize],
+    dirs: &[u8],
     reg: &Matrix3<f64>,
 ) -> f64 {
     let Some(center) = b.find(level, b.key_of(p, level)).or_else(|| {
@@ -144,7 +121,7 @@ fn best_match(
     let fixed_trace = c.trace() + reg.trace();
     for &m in b.neighbors(center).iter().filter(|&&m| m != NONE) {
         let slots = &b.nodes()[m as usize].surfels;
-        for &sb in dirs.iter().map(|&k| &slots[k]).filter(|&&s| s != NONE) {
+        for &sb in dirs.iter().map(|&k| &slots[k as usize]).filter(|&&s| s != NONE) {
             let other = &b.surfels()[sb as usize];
             if !other.usable() {
                 continue;
