@@ -238,8 +238,9 @@ pub fn bench(a: BenchArgs) -> Result<()> {
             );
         }
     }
-    if job.graph_key_views > 0 {
-        let (edges, ms) = app::bench::graph_step_ms(job.graph_key_views, 50);
+    // No times without key views (`--graph-key-views 0`): nothing to print.
+    let (edges, ms) = app::bench::graph_step_ms(job.graph_key_views, 50);
+    if !ms.is_empty() {
         println!(
             "\npose-graph step (synthetic, {} key views, {edges} edges, 50 on-line steps): median {:.2} ms, p99 {:.2} ms",
             job.graph_key_views,
