@@ -3,6 +3,7 @@
 
 pub mod bench;
 pub mod camera_driver;
+pub mod capacity;
 pub mod convert;
 pub mod dataset;
 pub mod demo;

@@ -216,8 +216,9 @@ pub fn bench(a: BenchArgs) -> Result<()> {
         graph_key_views: a.graph_key_views,
         params: odometry_params(a.lambda),
     };
-    let results = app::bench::run(&job)?;
     let threads = a.threads.unwrap_or_else(rayon::current_num_threads);
+    let capacity_before = app::capacity::parallel_capacity(threads);
+    let results = app::bench::run(&job)?;
     app::bench::print(&results, threads);
     if let Some(path) = &a.tracking_config {
         let config = mrsmap::io::tracker_config::read_tracker_config(path)?;
@@ -248,6 +249,12 @@ pub fn bench(a: BenchArgs) -> Result<()> {
             app::report::percentile(&ms, 0.99)
         );
     }
+    let capacity_after = app::capacity::parallel_capacity(threads);
+    println!(
+        "\nCPU capacity for {threads} threads (a fixed arithmetic loop on all threads against one): \
+         ×{capacity_before:.2} before, ×{capacity_after:.2} after the runs ({threads} = every thread had a free core; \
+         less means other load took cores, and the figures above are slower than this machine can be)"
+    );
     Ok(())
 }
 

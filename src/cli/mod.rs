@@ -97,6 +97,11 @@ pub enum Command {
     Eval(EvalCommand),
     /// Time map building and registration per frame at VGA and QVGA (images decoded
     /// beforehand, not timed); prints a Markdown table.
+    ///
+    /// Before and after the runs it measures how much of the requested threads the
+    /// machine really gives (a fixed arithmetic loop on all threads against one): on a
+    /// shared computer or a virtual machine another load can take a core, and then the
+    /// times are slower than the machine can be. Record that line with the figures.
     Bench(BenchArgs),
 }
 
