@@ -249,6 +249,9 @@ pub fn bench(a: BenchArgs) -> Result<()> {
             app::report::percentile(&ms, 0.99)
         );
     }
+    if threads == 1 {
+        return Ok(());
+    }
     let capacity_after = app::capacity::parallel_capacity(threads);
     println!(
         "\nCPU capacity for {threads} threads (a fixed arithmetic loop on all threads against one): \
