@@ -49,13 +49,12 @@ pub fn parallel_capacity(threads: usize) -> f64 {
     if threads == 1 {
         return 1.0;
     }
-    let mut ratios: Vec<f64> = (0..ROUNDS)
+    let ratios: Vec<f64> = (0..ROUNDS)
         .map(|_| {
             let one = timed(1).as_secs_f64();
             let all = timed(threads).as_secs_f64();
             threads as f64 * one / all.max(f64::MIN_POSITIVE)
         })
         .collect();
-    ratios.sort_by(f64::total_cmp);
-    ratios[ROUNDS / 2]
+    super::report::percentile(&ratios, 0.5)
 }

@@ -249,15 +249,15 @@ pub fn bench(a: BenchArgs) -> Result<()> {
             app::report::percentile(&ms, 0.99)
         );
     }
-    if threads == 1 {
-        return Ok(());
+    // One thread always gets its core: nothing to report.
+    if threads > 1 {
+        let capacity_after = app::capacity::parallel_capacity(threads);
+        println!(
+            "\nCPU capacity for {threads} threads (a fixed arithmetic loop on all threads against one): \
+             ×{capacity_before:.2} before, ×{capacity_after:.2} after the runs ({threads} = every thread had a free core; \
+             less means other load took cores, and the figures above are slower than this machine can be)"
+        );
     }
-    let capacity_after = app::capacity::parallel_capacity(threads);
-    println!(
-        "\nCPU capacity for {threads} threads (a fixed arithmetic loop on all threads against one): \
-         ×{capacity_before:.2} before, ×{capacity_after:.2} after the runs ({threads} = every thread had a free core; \
-         less means other load took cores, and the figures above are slower than this machine can be)"
-    );
     Ok(())
 }
 
