@@ -208,6 +208,23 @@ pub fn graph_step_ms(key_views: usize, steps: usize) -> (usize, Vec<f64>) {
     (edges, times)
 }
 
+/// The vector instruction set this binary was compiled for (`-C target-cpu`, see
+/// docs/benchmarks.md "Building for the robot's CPU"): it changes the figures, so it
+/// is printed with them.
+pub fn instruction_set() -> &'static str {
+    if cfg!(target_feature = "avx512f") {
+        "AVX-512 (x86-64-v4 or a newer target CPU)"
+    } else if cfg!(target_feature = "avx2") {
+        "AVX2 and FMA (x86-64-v3 or a newer target CPU)"
+    } else if cfg!(target_feature = "sse4.2") {
+        "SSE4.2 (x86-64-v2)"
+    } else if cfg!(target_arch = "x86_64") {
+        "SSE2 (the x86-64 baseline, runs on any x86-64)"
+    } else {
+        std::env::consts::ARCH
+    }
+}
+
 /// Prints results as a Markdown table.
 pub fn print(results: &[BenchResult], threads: usize) {
     println!(

@@ -218,6 +218,7 @@ pub fn bench(a: BenchArgs) -> Result<()> {
     };
     let threads = a.threads.unwrap_or_else(rayon::current_num_threads);
     let capacity_before = app::capacity::parallel_capacity(threads);
+    println!("compiled for: {}\n", app::bench::instruction_set());
     let results = app::bench::run(&job)?;
     app::bench::print(&results, threads);
     if let Some(path) = &a.tracking_config {

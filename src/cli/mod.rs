@@ -102,6 +102,10 @@ pub enum Command {
     /// machine really gives (a fixed arithmetic loop on all threads against one): on a
     /// shared computer or a virtual machine another load can take a core, and then the
     /// times are slower than the machine can be. Record that line with the figures.
+    ///
+    /// It also prints the instruction set the binary was compiled for: a build for the
+    /// robot's own CPU (`RUSTFLAGS="-C target-cpu=native" cargo build --release`) is
+    /// faster than the portable default, with the same results (docs/benchmarks.md).
     Bench(BenchArgs),
 }
 
