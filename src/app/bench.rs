@@ -215,7 +215,7 @@ pub fn instruction_set() -> &'static str {
     if cfg!(target_feature = "avx512f") {
         "AVX-512 (x86-64-v4 or a newer target CPU)"
     } else if cfg!(target_feature = "avx2") {
-        "AVX2 and FMA (x86-64-v3 or a newer target CPU)"
+        "AVX2 (x86-64-v3 or a newer target CPU)"
     } else if cfg!(target_feature = "sse4.2") {
         "SSE4.2 (x86-64-v2)"
     } else if cfg!(target_arch = "x86_64") {

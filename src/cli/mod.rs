@@ -105,7 +105,8 @@ pub enum Command {
     ///
     /// It also prints the instruction set the binary was compiled for: a build for the
     /// robot's own CPU (`RUSTFLAGS="-C target-cpu=native" cargo build --release`) is
-    /// faster than the portable default, with the same results (docs/benchmarks.md).
+    /// faster than the portable default, with the same trajectories bit for bit on the
+    /// machines measured (docs/benchmarks.md).
     Bench(BenchArgs),
 }
 
