@@ -119,9 +119,10 @@ fn left_of<T: nalgebra::RealField + Copy>(a: [T; 2], b: [T; 2], x: T, y: T) -> b
     x < (b[0] - a[0]) * (y - a[1]) / (b[1] - a[1]) + a[0]
 }
 
-/// Even–odd rule.
+/// Whether `(x, y)` lies inside the polygon (even–odd rule); in single precision for
+/// the pixel gate, in double for the mapping tool's volumes (`slam::volume`).
 #[inline]
-fn point_in_polygon<T: nalgebra::RealField + Copy>(polygon: &[[T; 2]], x: T, y: T) -> bool {
+pub(crate) fn point_in_polygon<T: nalgebra::RealField + Copy>(polygon: &[[T; 2]], x: T, y: T) -> bool {
     let mut inside = false;
     let Some(&last) = polygon.last() else { return false };
     let mut b = last;

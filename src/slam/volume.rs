@@ -8,6 +8,7 @@
 //! pointing to the side the cameras are on, and `x` along the first footprint edge.
 
 use crate::geometry::Pose;
+use crate::map::region::point_in_polygon;
 use crate::synthetic::Pcg32;
 use nalgebra::{Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
@@ -100,19 +101,6 @@ impl VolumeShape {
             VolumeShape::Box { half_extents } => (0..3).all(|i| p[i].abs() <= half_extents[i]),
         }
     }
-}
-
-/// Even–odd rule.
-fn point_in_polygon(polygon: &[[f64; 2]], x: f64, y: f64) -> bool {
-    let mut inside = false;
-    let n = polygon.len();
-    for i in 0..n {
-        let (a, b) = (polygon[i], polygon[(i + n - 1) % n]);
-        if (a[1] > y) != (b[1] > y) && x < (b[0] - a[0]) * (y - a[1]) / (b[1] - a[1]) + a[0] {
-            inside = !inside;
-        }
-    }
-    inside
 }
 
 /// A plane `n·p = d` with unit normal `n`.
