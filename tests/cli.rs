@@ -199,3 +199,31 @@ fn bench_runs_on_the_shipped_clip_with_or_without_the_pose_graph() {
         assert_eq!(text.contains("pose-graph step"), graph != "0", "{text}");
     }
 }
+
+#[test]
+fn offline_tracking_with_a_stride_tracks_every_nth_frame() {
+    let dir = temp_dir("stride");
+    let traj = dir.join("traj.txt");
+    let (clip, camera, config) = (teddy_clip(), fr3_camera_file(), root().join("robot_config/tracker.toml"));
+    let args = ["track", "--config", path_str(&config), "--dataset", path_str(&clip), "--camera", path_str(&camera)];
+    let out = mrsmap(&[&args[..], &["--stride", "3", "--qvga", "--trajectory", path_str(&traj)]].concat());
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("3 frames tracking"), "frames 0, 3 and 6 of 8: {text}");
+    let stamps: Vec<String> = std::fs::read_to_string(&traj)
+        .expect("trajectory")
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .map(|l| l.split(' ').next().unwrap_or_default().to_string())
+        .collect();
+    let depth: Vec<String> = std::fs::read_to_string(clip.join("associations.txt"))
+        .expect("associations")
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .map(|l| l.split(' ').nth(2).unwrap_or_default().to_string())
+        .collect();
+    assert_eq!(stamps, [depth[0].clone(), depth[3].clone(), depth[6].clone()], "depth stamps of the tracked frames");
+    let out = mrsmap(&[&args[..], &["--stride", "0"]].concat());
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--stride"), "names the option");
+}
