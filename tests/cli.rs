@@ -201,12 +201,12 @@ fn bench_runs_on_the_shipped_clip_with_or_without_the_pose_graph() {
 }
 
 #[test]
-fn offline_tracking_with_a_stride_tracks_every_nth_frame() {
-    let dir = temp_dir("stride");
+fn offline_tracking_every_nth_frame() {
+    let dir = temp_dir("every");
     let traj = dir.join("traj.txt");
     let (clip, camera, config) = (teddy_clip(), fr3_camera_file(), root().join("robot_config/tracker.toml"));
     let args = ["track", "--config", path_str(&config), "--dataset", path_str(&clip), "--camera", path_str(&camera)];
-    let out = mrsmap(&[&args[..], &["--stride", "3", "--qvga", "--trajectory", path_str(&traj)]].concat());
+    let out = mrsmap(&[&args[..], &["--every", "3", "--qvga", "--trajectory", path_str(&traj)]].concat());
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("3 frames tracking"), "frames 0, 3 and 6 of 8: {text}");
@@ -223,7 +223,7 @@ fn offline_tracking_with_a_stride_tracks_every_nth_frame() {
         .map(|l| l.split(' ').nth(2).unwrap_or_default().to_string())
         .collect();
     assert_eq!(stamps, [depth[0].clone(), depth[3].clone(), depth[6].clone()], "depth stamps of the tracked frames");
-    let out = mrsmap(&[&args[..], &["--stride", "0"]].concat());
+    let out = mrsmap(&[&args[..], &["--every", "0"]].concat());
     assert!(!out.status.success());
-    assert!(String::from_utf8_lossy(&out.stderr).contains("--stride"), "names the option");
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--every"), "names the option");
 }

@@ -153,7 +153,7 @@ fn job_template(dir: &Path) -> mrsmap::app::track_dataset::TrackDatasetJob {
         dataset: teddy_clip(),
         camera: fr3_camera_file(),
         first_frame: 0,
-        stride: 1,
+        every: 1,
         max_frames: None,
         qvga: false,
         start_at_ground_truth: false,

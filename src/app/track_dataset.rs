@@ -25,8 +25,8 @@ pub struct TrackDatasetJob {
     pub camera: PathBuf,
     /// Skip this many frames.
     pub first_frame: usize,
-    /// Track every `stride`-th frame from the first (1: every frame).
-    pub stride: usize,
+    /// Track every `every`-th frame from the first (1: every frame).
+    pub every: usize,
     /// Use at most this many frames.
     pub max_frames: Option<usize>,
     /// Halve images and intrinsics on load.
@@ -59,7 +59,7 @@ pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<Vec<ObjectRe
     let camera = read_camera(&job.camera)?;
     let dataset =
         TumDataset::open(&job.dataset).with_context(|| format!("opening dataset {}", job.dataset.display()))?;
-    let mut frames: Vec<_> = dataset.frames.iter().skip(job.first_frame).step_by(job.stride.max(1)).cloned().collect();
+    let mut frames: Vec<_> = dataset.frames.iter().skip(job.first_frame).step_by(job.every.max(1)).cloned().collect();
     if let Some(n) = job.max_frames {
         frames.truncate(n);
     }

@@ -140,11 +140,11 @@ pub struct TrackArgs {
     /// Offline: skip this many frames.
     #[arg(long, default_value_t = 0, requires = "dataset")]
     pub first_frame: usize,
-    /// Offline: track every N-th frame only, as a tracker sees the camera when it takes
-    /// the newest frame and each step lasts N camera periods (a shared CPU, a faster
-    /// camera): the motion between tracked frames is N times larger.
+    /// Offline: track only every n-th frame (1–30; as `replay --every`), as a tracker
+    /// sees the camera when it takes the newest frame and each step lasts n camera periods
+    /// (a shared CPU, a faster camera): the motion between tracked frames is n times larger.
     #[arg(long, default_value_t = 1, requires = "dataset", value_parser = clap::value_parser!(u32).range(1..=30))]
-    pub stride: u32,
+    pub every: u32,
     /// Offline: halve images and intrinsics on load.
     #[arg(long, requires = "dataset")]
     pub qvga: bool,

@@ -41,7 +41,7 @@ pub fn track(a: TrackArgs) -> Result<()> {
             dataset,
             camera,
             first_frame: a.first_frame,
-            stride: a.stride as usize,
+            every: a.every as usize,
             max_frames: a.max_frames.map(|m| m as usize),
             qvga: a.qvga,
             start_at_ground_truth: a.start_at_ground_truth,
