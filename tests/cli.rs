@@ -3,6 +3,9 @@
 mod common;
 
 use common::*;
+use mrsmap::app::track_dataset::TrackDatasetJob;
+use mrsmap::io::tracker_config::read_tracker_config;
+use mrsmap::io::tum::{TumDataset, format_stamp};
 use std::process::Command;
 
 fn mrsmap(args: &[&str]) -> std::process::Output {
@@ -216,14 +219,24 @@ fn offline_tracking_every_nth_frame() {
         .filter(|l| !l.starts_with('#'))
         .map(|l| l.split(' ').next().unwrap_or_default().to_string())
         .collect();
-    let depth: Vec<String> = std::fs::read_to_string(clip.join("associations.txt"))
-        .expect("associations")
-        .lines()
-        .filter(|l| !l.starts_with('#'))
-        .map(|l| l.split(' ').nth(2).unwrap_or_default().to_string())
-        .collect();
-    assert_eq!(stamps, [depth[0].clone(), depth[3].clone(), depth[6].clone()], "depth stamps of the tracked frames");
+    let frames = TumDataset::open(&clip).expect("clip").frames;
+    let depth: Vec<String> = [0, 3, 6].iter().map(|&i| format_stamp(frames[i].depth_stamp_ns)).collect();
+    assert_eq!(stamps, depth, "depth stamps of the tracked frames");
     let out = mrsmap(&[&args[..], &["--every", "0"]].concat());
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("--every"), "names the option");
+    // The library job refuses it too (as replay's), rather than reading it as 1.
+    let config = read_tracker_config(&config).expect("config");
+    let job = TrackDatasetJob {
+        dataset: clip,
+        camera,
+        first_frame: 0,
+        every: 0,
+        max_frames: None,
+        qvga: true,
+        start_at_ground_truth: false,
+        trajectory: None,
+    };
+    let err = mrsmap::app::track_dataset::run(&config, &job).expect_err("every 0 is refused");
+    assert!(err.to_string().contains("--every"), "{err}");
 }

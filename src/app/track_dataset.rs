@@ -56,10 +56,13 @@ pub struct ObjectResult {
 
 /// Tracks every object through the dataset.
 pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<Vec<ObjectResult>> {
+    if job.every == 0 {
+        bail!("--every must be at least 1");
+    }
     let camera = read_camera(&job.camera)?;
     let dataset =
         TumDataset::open(&job.dataset).with_context(|| format!("opening dataset {}", job.dataset.display()))?;
-    let mut frames: Vec<_> = dataset.frames.iter().skip(job.first_frame).step_by(job.every.max(1)).cloned().collect();
+    let mut frames: Vec<_> = dataset.frames.iter().skip(job.first_frame).step_by(job.every).cloned().collect();
     if let Some(n) = job.max_frames {
         frames.truncate(n);
     }
