@@ -36,7 +36,14 @@ pub struct RawMessage<'a> {
 }
 
 /// Reading through the chunk index; a damaged chunk is skipped (and reported) and the
-/// reading goes on with the chunks not yet read.
+/// reading goes on with the other chunks.
+///
+/// Chunks may overlap in log time, so when one turns out damaged, other chunks already
+/// read may still hold messages not yet delivered. The reading then restarts over every
+/// undamaged chunk that can hold such messages (ending at or after the last delivered log
+/// time) and passes over what was delivered already: messages before that time, and at
+/// it the ones recorded in `delivered_at_last`. Only the damaged chunk's own messages are
+/// lost.
 struct Indexed {
     file: File,
     summary: Summary,
@@ -45,15 +52,36 @@ struct Indexed {
     chunk: Vec<u8>,
     /// Offsets of the chunks requested so far (the last one is being read).
     requested: Vec<u64>,
-    /// `requested.len()` at the last skip.
-    requested_at_skip: usize,
+    /// Offsets of the chunks found damaged.
+    damaged: Vec<u64>,
+    /// Log time of the last delivered message.
+    last_time: Option<u64>,
+    /// The messages delivered at `last_time`.
+    delivered_at_last: Vec<MessageKey>,
+    /// After a restart, until a message after `last_time` comes: those of
+    /// `delivered_at_last` not yet met again.
+    resuming: Option<Vec<MessageKey>>,
 }
+
+/// What tells apart messages of one log time: channel, sequence, publish time, length.
+type MessageKey = (u16, u32, u64, usize);
 
 impl Indexed {
     fn new(file: File, summary: Summary, topics: &[&str]) -> Result<Self, McapError> {
         let topics: Vec<String> = topics.iter().map(|t| t.to_string()).collect();
         let reader = IndexedReader::new_with_options(&summary, Self::options(&topics))?;
-        Ok(Indexed { file, summary, topics, reader, chunk: Vec::new(), requested: Vec::new(), requested_at_skip: 0 })
+        Ok(Indexed {
+            file,
+            summary,
+            topics,
+            reader,
+            chunk: Vec::new(),
+            requested: Vec::new(),
+            damaged: Vec::new(),
+            last_time: None,
+            delivered_at_last: Vec::new(),
+            resuming: None,
+        })
     }
 
     fn options(topics: &[String]) -> IndexedReaderOptions {
@@ -77,9 +105,18 @@ impl Indexed {
                     }
                 }
                 Ok(IndexedReadEvent::Message { header, data }) => {
+                    let key = (header.channel_id, header.sequence, header.publish_time, data.len());
+                    if delivered_before(&mut self.resuming, self.last_time, header.log_time, key) {
+                        continue;
+                    }
                     let Some(channel) = self.summary.channels.get(&header.channel_id) else {
                         return Some(Err(McapError::UnknownChannel(header.sequence, header.channel_id)));
                     };
+                    if self.last_time != Some(header.log_time) {
+                        self.last_time = Some(header.log_time);
+                        self.delivered_at_last.clear();
+                    }
+                    self.delivered_at_last.push(key);
                     payload.clear();
                     payload.extend_from_slice(data);
                     return Some(Ok((channel.clone(), header.log_time)));
@@ -88,25 +125,60 @@ impl Indexed {
         }
     }
 
-    /// After damage in the chunk read last: a reader over the chunks not requested yet.
-    /// Returns `false` if there is none left (or nothing was read since the last skip).
+    /// After damage in the chunk read last: restarts over the undamaged chunks that may
+    /// still hold undelivered messages. Returns `false` if there is none left (or the
+    /// damage cannot be pinned on a chunk not already skipped).
     fn skip_damaged_chunk(&mut self) -> bool {
-        if self.requested.len() == self.requested_at_skip {
+        let Some(&offset) = self.requested.last() else { return false };
+        if self.damaged.contains(&offset) {
             return false;
         }
-        self.requested_at_skip = self.requested.len();
+        self.damaged.push(offset);
         let mut rest = self.summary.clone();
-        rest.chunk_indexes.retain(|c| c.compressed_data_offset().is_ok_and(|offset| !self.requested.contains(&offset)));
+        let (requested, damaged, last_time) = (&self.requested, &self.damaged, self.last_time);
+        rest.chunk_indexes.retain(|c| {
+            c.compressed_data_offset().is_ok_and(|offset| {
+                !damaged.contains(&offset)
+                    && (!requested.contains(&offset) || last_time.is_none_or(|t| c.message_end_time >= t))
+            })
+        });
         if rest.chunk_indexes.is_empty() {
             return false;
         }
         match IndexedReader::new_with_options(&rest, Self::options(&self.topics)) {
             Ok(reader) => {
                 self.reader = reader;
+                self.resuming = Some(self.delivered_at_last.clone());
                 true
             }
             Err(_) => false,
         }
+    }
+}
+
+/// After a restart over the chunks (`resuming`, see [`Indexed`]): whether a message was
+/// delivered before it. Each delivered message of the last time is matched once; the
+/// first message after that time ends the resumption.
+fn delivered_before(
+    resuming: &mut Option<Vec<MessageKey>>,
+    last_time: Option<u64>,
+    log_time: u64,
+    key: MessageKey,
+) -> bool {
+    let (Some(pending), Some(last)) = (resuming.as_mut(), last_time) else { return false };
+    if log_time > last {
+        *resuming = None;
+        return false;
+    }
+    if log_time < last {
+        return true;
+    }
+    match pending.iter().position(|k| *k == key) {
+        Some(i) => {
+            pending.swap_remove(i);
+            true
+        }
+        None => false,
     }
 }
 
@@ -248,5 +320,89 @@ fn next_streamed(
             }
             Ok(_) => {}
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use mcap::records::MessageHeader;
+    use std::collections::BTreeMap;
+
+    /// Log times (ns) of the chunks of the test file, in file order: the first three
+    /// overlap in time (the first two at the same times), the fourth follows.
+    fn chunk_times() -> [Vec<u64>; 4] {
+        let steps = |from: u64, to: u64| (from..=to).step_by(10).collect::<Vec<u64>>();
+        [steps(0, 90), steps(0, 90), steps(50, 140), steps(200, 290)]
+    }
+
+    /// An indexed file with one zstd chunk per entry of `chunk_times` of messages on `/t`
+    /// whose payload is their log time; returns its bytes.
+    fn overlapping_chunks() -> Vec<u8> {
+        let mut out = std::io::Cursor::new(Vec::new());
+        let mut w = mcap::WriteOptions::new()
+            .compression(Some(mcap::Compression::Zstd))
+            .chunk_size(None)
+            .create(&mut out)
+            .expect("writer");
+        let schema = w.add_schema("t", "jsonschema", b"{}").expect("schema");
+        let channel = w.add_channel(schema, "/t", "json", &BTreeMap::new()).expect("channel");
+        let mut sequence = 0;
+        for times in chunk_times() {
+            for t in times {
+                let header = MessageHeader { channel_id: channel, sequence, log_time: t, publish_time: t };
+                w.write_to_known_channel(&header, &t.to_le_bytes()).expect("message");
+                sequence += 1;
+            }
+            w.flush().expect("ends the chunk");
+        }
+        w.finish().expect("finish");
+        drop(w);
+        out.into_inner()
+    }
+
+    /// Log times read from `path` (checked against their payloads) and chunks skipped.
+    fn read_all(path: &Path) -> (Vec<u64>, usize) {
+        let mut source = McapSource::open(path, &["/t"]).expect("opens");
+        assert_eq!(source.mode(), ReadMode::Indexed);
+        let mut times = Vec::new();
+        while let Some(message) = source.next_message() {
+            let message = message.expect("intact chunks read");
+            assert_eq!(message.data, message.log_time_ns.to_le_bytes(), "payload of {}", message.log_time_ns);
+            times.push(message.log_time_ns);
+        }
+        (times, source.skipped_chunks().len())
+    }
+
+    #[test]
+    fn a_damaged_chunk_loses_only_its_own_messages_when_chunks_overlap_in_time() {
+        let bytes = overlapping_chunks();
+        let dir = std::env::temp_dir().join(format!("mrsmap-overlap-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        let summary = mcap::Summary::read(&bytes).expect("summary").expect("has one");
+        let mut chunks = summary.chunk_indexes.clone();
+        chunks.sort_by_key(|c| c.chunk_start_offset);
+        assert_eq!(chunks.len(), 4);
+        // Intact; each chunk damaged in turn; the first and the third together (the third
+        // is found damaged after messages of the first two at its start time went out).
+        for damaged in [vec![], vec![0], vec![1], vec![2], vec![3], vec![0, 2]] {
+            let mut bad = bytes.clone();
+            for &k in &damaged {
+                let chunk: &mcap::records::ChunkIndex = &chunks[k];
+                let start = chunk.compressed_data_offset().expect("offset") as usize;
+                bad[start..start + chunk.compressed_size as usize].fill(0xA5);
+            }
+            let path = dir.join("file.mcap");
+            std::fs::write(&path, &bad).expect("write");
+            let mut expected: Vec<u64> = chunk_times()
+                .into_iter()
+                .enumerate()
+                .filter(|(k, _)| !damaged.contains(k))
+                .flat_map(|(_, times)| times)
+                .collect();
+            expected.sort();
+            assert_eq!(read_all(&path), (expected, damaged.len()), "chunks {damaged:?} damaged");
+        }
+        std::fs::remove_dir_all(&dir).ok();
     }
 }
