@@ -7,15 +7,24 @@
   /alt/color (bgr8), /alt/depth (32FC1, m), /alt/camera_info.
 - tests/data/python_foxglove.mcap: `mcap-protobuf-support` with the Foxglove schemas
   (foxglove.RawImage rgb8 and 16UC1, foxglove.CameraCalibration) on the same default topics.
+- tests/data/python_ros2_compressed.mcap: sensor_msgs/msg/CompressedImage as ROS 2's
+  image_transport writes it: colour "rgb8; jpeg compressed bgr8" (JPEG, quality 95, no
+  chroma subsampling) on /camera/color/image_raw/compressed, depth "16UC1; compressedDepth
+  png" on /camera/depth/image_raw/compressedDepth and "32FC1; compressedDepth png"
+  (quantised inverse depth, image_transport's defaults: depth_max 10 m, quantisation 100)
+  on /alt/depth/compressedDepth; CameraInfo on /camera/color/camera_info.
+- tests/data/python_foxglove_compressed.mcap: foxglove.CompressedImage, colour "png" and
+  depth "png" (16-bit grey, mm) on the default topics, with foxglove.CameraCalibration.
 
 Images are 64x48 with pixel values given by a formula the Rust test repeats
 (tests/mcap_interop.rs): colour (u*7 + v*3 + i, u + 5*v, 40*i + u) mod 256, depth
 500 + 10*u + v + i mm, frame i stamped 1.0 + i/30 s (colour 5 ms before depth).
 
     python3 -m pip install 'mcap==1.6.0' 'mcap-ros2-support==0.6.0' \
-        'mcap-protobuf-support==0.6.0' 'foxglove-schemas-protobuf==0.4.0'
+        'mcap-protobuf-support==0.6.0' 'foxglove-schemas-protobuf==0.4.0' 'pillow==13.0.0'
     python3 scripts/make_mcap_fixture.py
 """
+import io
 import struct
 import sys
 from pathlib import Path
@@ -52,6 +61,23 @@ def stamp(ns):
     return {"sec": ns // 1_000_000_000, "nanosec": ns % 1_000_000_000}
 
 
+def camera_info(header, width, height, fx, fy, cx, cy):
+    """A sensor_msgs/msg/CameraInfo of a pinhole camera without distortion."""
+    return {"header": header, "height": height, "width": width, "distortion_model": "plumb_bob",
+            "d": [0.0] * 5, "k": [fx, 0, cx, 0, fy, cy, 0, 0, 1], "r": [1, 0, 0, 0, 1, 0, 0, 0, 1],
+            "p": [fx, 0, cx, 0, 0, fy, cy, 0, 0, 0, 1, 0], "binning_x": 0, "binning_y": 0,
+            "roi": {"x_offset": 0, "y_offset": 0, "height": 0, "width": 0, "do_rectify": False}}
+
+
+def foxglove_calibration(ns):
+    from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
+    cal = CameraCalibration(width=W, height=H, distortion_model="plumb_bob", D=[0.0] * 5,
+                            K=[FX, 0, CX, 0, FY, CY, 0, 0, 1], R=[1, 0, 0, 0, 1, 0, 0, 0, 1],
+                            P=[FX, 0, CX, 0, 0, FY, CY, 0, 0, 0, 1, 0], frame_id="camera")
+    cal.timestamp.FromNanoseconds(ns)
+    return cal
+
+
 def ros2(path):
     from mcap_ros2.writer import Writer
     with open(path, "wb") as f:
@@ -61,10 +87,7 @@ def ros2(path):
         for i in range(N):
             c_ns, d_ns = stamps(i)
             hdr = lambda ns: {"stamp": stamp(ns), "frame_id": "camera_color_optical_frame"}
-            cam = {"header": hdr(d_ns), "height": H, "width": W, "distortion_model": "plumb_bob",
-                   "d": [0.0] * 5, "k": [FX, 0, CX, 0, FY, CY, 0, 0, 1], "r": [1, 0, 0, 0, 1, 0, 0, 0, 1],
-                   "p": [FX, 0, CX, 0, 0, FY, CY, 0, 0, 0, 1, 0], "binning_x": 0, "binning_y": 0,
-                   "roi": {"x_offset": 0, "y_offset": 0, "height": 0, "width": 0, "do_rectify": False}}
+            cam = camera_info(hdr(d_ns), W, H, FX, FY, CX, CY)
             rgb = bytes(x for p in colour(i) for x in p)
             bgr = bytes(x for p in colour(i) for x in reversed(p))
             mm = struct.pack("<%dH" % (W * H), *depth_mm(i))
@@ -86,17 +109,12 @@ def ros2(path):
 
 
 def foxglove(path):
-    from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
     from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
     from mcap_protobuf.writer import Writer
     with open(path, "wb") as f, Writer(f) as w:
         for i in range(N):
             c_ns, d_ns = stamps(i)
-            cal = CameraCalibration(width=W, height=H, distortion_model="plumb_bob", D=[0.0] * 5,
-                                    K=[FX, 0, CX, 0, FY, CY, 0, 0, 1], R=[1, 0, 0, 0, 1, 0, 0, 0, 1],
-                                    P=[FX, 0, CX, 0, 0, FY, CY, 0, 0, 0, 1, 0], frame_id="camera")
-            cal.timestamp.FromNanoseconds(d_ns)
-            w.write_message("/camera/color/camera_info", cal, log_time=d_ns, publish_time=d_ns)
+            w.write_message("/camera/color/camera_info", foxglove_calibration(d_ns), log_time=d_ns, publish_time=d_ns)
             img = RawImage(width=W, height=H, encoding="rgb8", step=3 * W, frame_id="camera",
                            data=bytes(x for p in colour(i) for x in p))
             img.timestamp.FromNanoseconds(c_ns)
@@ -107,8 +125,88 @@ def foxglove(path):
             w.write_message("/camera/depth/image_raw", dep, log_time=d_ns, publish_time=d_ns)
 
 
+COMPRESSED_IMAGE = "std_msgs/Header header\nstring format\nuint8[] data\n" + SEP + HEADER + SEP + TIME
+# image_transport's compressedDepth defaults (depth_max 10 m, depth_quantization 100).
+QUANT_A = 100.0 * 101.0
+QUANT_B = 1.0 - QUANT_A / 10.0
+
+
+def jpeg(i):
+    from PIL import Image
+    out = io.BytesIO()
+    Image.frombytes("RGB", (W, H), bytes(x for p in colour(i) for x in p)).save(out, "JPEG", quality=95, subsampling=0)
+    return out.getvalue()
+
+
+def png_rgb(i):
+    from PIL import Image
+    out = io.BytesIO()
+    Image.frombytes("RGB", (W, H), bytes(x for p in colour(i) for x in p)).save(out, "PNG")
+    return out.getvalue()
+
+
+def png16(values):
+    from PIL import Image
+    out = io.BytesIO()
+    Image.frombytes("I;16", (W, H), struct.pack("<%dH" % (W * H), *values)).save(out, "PNG")
+    return out.getvalue()
+
+
+def compressed_depth(i, metres):
+    # struct ConfigHeader { int32 format (INV_DEPTH = 0); float depthParam[2]; }
+    header = struct.pack("<iff", 0, QUANT_A if metres else 0.0, QUANT_B if metres else 0.0)
+    if metres:
+        values = [round(QUANT_A / (d / 1000.0) + QUANT_B) for d in depth_mm(i)]
+    else:
+        values = depth_mm(i)
+    return header + png16(values)
+
+
+def ros2_compressed(path):
+    from mcap_ros2.writer import Writer
+    with open(path, "wb") as f:
+        w = Writer(f)
+        image = w.register_msgdef("sensor_msgs/msg/CompressedImage", COMPRESSED_IMAGE)
+        info = w.register_msgdef("sensor_msgs/msg/CameraInfo", CAMERA_INFO)
+        for i in range(N):
+            c_ns, d_ns = stamps(i)
+            hdr = lambda ns: {"stamp": stamp(ns), "frame_id": "camera_color_optical_frame"}
+            cam = camera_info(hdr(d_ns), W, H, FX, FY, CX, CY)
+            w.write_message("/camera/color/camera_info", info, cam, log_time=d_ns, publish_time=d_ns)
+            w.write_message("/camera/color/image_raw/compressed", image,
+                            {"header": hdr(c_ns), "format": "rgb8; jpeg compressed bgr8", "data": jpeg(i)},
+                            log_time=c_ns, publish_time=c_ns)
+            w.write_message("/camera/depth/image_raw/compressedDepth", image,
+                            {"header": hdr(d_ns), "format": "16UC1; compressedDepth png",
+                             "data": compressed_depth(i, False)},
+                            log_time=d_ns, publish_time=d_ns)
+            w.write_message("/alt/depth/compressedDepth", image,
+                            {"header": hdr(d_ns), "format": "32FC1; compressedDepth png",
+                             "data": compressed_depth(i, True)},
+                            log_time=d_ns, publish_time=d_ns)
+        w.finish()
+
+
+def foxglove_compressed(path):
+    from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
+    from mcap_protobuf.writer import Writer
+    with open(path, "wb") as f, Writer(f) as w:
+        for i in range(N):
+            c_ns, d_ns = stamps(i)
+            w.write_message("/camera/color/camera_info", foxglove_calibration(d_ns), log_time=d_ns, publish_time=d_ns)
+            img = CompressedImage(frame_id="camera", format="png", data=png_rgb(i))
+            img.timestamp.FromNanoseconds(c_ns)
+            w.write_message("/camera/color/image_raw", img, log_time=c_ns, publish_time=c_ns)
+            dep = CompressedImage(frame_id="camera", format="png", data=png16(depth_mm(i)))
+            dep.timestamp.FromNanoseconds(d_ns)
+            w.write_message("/camera/depth/image_raw", dep, log_time=d_ns, publish_time=d_ns)
+
+
 if __name__ == "__main__":
     out = Path(sys.argv[1] if len(sys.argv) > 1 else Path(__file__).resolve().parent.parent / "tests" / "data")
     ros2(out / "python_ros2.mcap")
     foxglove(out / "python_foxglove.mcap")
-    print("wrote", out / "python_ros2.mcap", "and", out / "python_foxglove.mcap")
+    ros2_compressed(out / "python_ros2_compressed.mcap")
+    foxglove_compressed(out / "python_foxglove_compressed.mcap")
+    print("wrote python_ros2.mcap, python_foxglove.mcap, python_ros2_compressed.mcap and",
+          "python_foxglove_compressed.mcap to", out)

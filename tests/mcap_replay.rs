@@ -1,6 +1,6 @@
 //! MCAP recordings: reading files of an independent writer (Python `mcap-ros2-support`,
-//! `mcap-protobuf-support` with the Foxglove schemas: tests/data/python_*.mcap, made by
-//! scripts/make_mcap_fixture.py), conversion, replay (same poses as the dataset run,
+//! `mcap-protobuf-support` with the Foxglove schemas, raw and compressed images:
+//! tests/data/python_*.mcap, made by scripts/make_mcap_fixture.py), conversion, replay (same poses as the dataset run,
 //! byte-identical output at 1 and 2 threads) and bad recordings.
 
 mod common;
@@ -72,6 +72,46 @@ fn reads_ros2_recordings_of_the_python_writer() {
 #[test]
 fn reads_foxglove_raw_images_of_the_python_writer() {
     check_fixture(&root().join("tests/data/python_foxglove.mcap"), RecordingTopics::default(), 1);
+}
+
+#[test]
+fn reads_foxglove_compressed_images_of_the_python_writer() {
+    // PNG colour and 16-bit PNG depth: lossless, so the same pixels as the raw fixture.
+    check_fixture(&root().join("tests/data/python_foxglove_compressed.mcap"), RecordingTopics::default(), 1);
+}
+
+#[test]
+fn reads_ros2_compressed_images_of_the_python_writer() {
+    let path = root().join("tests/data/python_ros2_compressed.mcap");
+    for (depth_topic, metres) in
+        [("/camera/depth/image_raw/compressedDepth", false), ("/alt/depth/compressedDepth", true)]
+    {
+        let topics = RecordingTopics {
+            color: "/camera/color/image_raw/compressed".into(),
+            depth: depth_topic.into(),
+            camera_info: "/camera/color/camera_info".into(),
+        };
+        let mut reader = RecordingReader::open(&path, topics, None).expect("opens");
+        let mut i = 0;
+        while let Some(frame) = reader.next_frame().expect("decodes") {
+            assert_eq!(frame.stamp_ns, expected_depth_stamp_ns(i), "frame {i} has the depth stamp");
+            assert_eq!((frame.camera.width, frame.camera.height), (W as u32, H as u32));
+            // JPEG (quality 95, no chroma subsampling) is lossy: close, and in RGB order (a
+            // swap of red and blue would differ by ~100 on average).
+            let expected = expected_rgb(i);
+            let diffs: Vec<u32> = frame.rgb.iter().zip(&expected).map(|(a, b)| u32::from(a.abs_diff(*b))).collect();
+            let mean = diffs.iter().sum::<u32>() as f64 / diffs.len() as f64;
+            assert!(mean < 3.0 && diffs.iter().all(|&d| d <= 40), "JPEG colour of frame {i}: mean error {mean}");
+            for (k, (&got, want_mm)) in frame.depth.iter().zip(expected_depth_mm(i)).enumerate() {
+                let got_mm = f64::from(got) * frame.camera.depth_scale_m * 1e3;
+                // 32FC1: quantised inverse depth (0.1 mm steps at 1 m), then 0.2 mm units.
+                let tolerance = if metres { 0.5 } else { 1e-9 };
+                assert!((got_mm - f64::from(want_mm)).abs() <= tolerance, "depth {k} of frame {i}: {got_mm} mm");
+            }
+            i += 1;
+        }
+        assert_eq!(i, 3, "all frames with depth from {depth_topic}");
+    }
 }
 
 fn convert_clip(dir: &Path, depth_encoding: DepthEncoding) -> PathBuf {

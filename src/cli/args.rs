@@ -331,10 +331,12 @@ pub struct QualityArgs {
 /// Topics of an RGB-D recording.
 #[derive(Args)]
 pub struct TopicArgs {
-    /// Colour images (sensor_msgs/msg/Image or foxglove.RawImage: rgb8, bgr8, rgba8, bgra8).
+    /// Colour images (sensor_msgs/msg/Image or foxglove.RawImage: rgb8, bgr8, rgba8, bgra8;
+    /// or CompressedImage of either: JPEG, PNG).
     #[arg(long, default_value = mrsmap::io::recording::DEFAULT_COLOR_TOPIC)]
     pub color_topic: String,
-    /// Depth images registered to colour (16UC1/mono16 in mm, 32FC1 in m).
+    /// Depth images registered to colour (16UC1/mono16 in mm, 32FC1 in m; or CompressedImage:
+    /// 16-bit PNG in mm, image_transport's compressedDepth).
     #[arg(long, default_value = mrsmap::io::recording::DEFAULT_DEPTH_TOPIC)]
     pub depth_topic: String,
     /// Calibration (sensor_msgs/msg/CameraInfo or foxglove.CameraCalibration).

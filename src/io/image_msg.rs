@@ -1,10 +1,12 @@
 //! Image and calibration messages of a recording, decoded into the frame's pixel formats:
-//! ROS 2 `sensor_msgs/msg/Image` and `CameraInfo` (CDR), Foxglove `foxglove.RawImage` and
-//! `foxglove.CameraCalibration` (protobuf).
+//! ROS 2 `sensor_msgs/msg/Image`, `CompressedImage` and `CameraInfo` (CDR), Foxglove
+//! `foxglove.RawImage`, `foxglove.CompressedImage` and `foxglove.CameraCalibration`
+//! (protobuf). Compressed images are decompressed by [`super::compressed_image`].
 
+use super::compressed_image::decompress;
 use super::ros2::{self, CameraInfo, Image};
 use crate::geometry::{CameraModel, PinholeIntrinsics};
-use foxglove::messages::{CameraCalibration, RawImage};
+use foxglove::messages::{CameraCalibration, CompressedImage, RawImage};
 use prost::Message as _;
 
 /// Metres per unit of depth converted from `32FC1` (as TUM: up to 13.1 m).
@@ -81,8 +83,12 @@ pub enum MessageKind {
     RosImage,
     /// `sensor_msgs/msg/CameraInfo` in CDR.
     RosCameraInfo,
+    /// `sensor_msgs/msg/CompressedImage` in CDR.
+    RosCompressedImage,
     /// `foxglove.RawImage` in protobuf.
     FoxgloveImage,
+    /// `foxglove.CompressedImage` in protobuf.
+    FoxgloveCompressedImage,
     /// `foxglove.CameraCalibration` in protobuf.
     FoxgloveCalibration,
 }
@@ -93,15 +99,55 @@ impl MessageKind {
         Some(match (schema_name, message_encoding) {
             ("sensor_msgs/msg/Image" | "sensor_msgs/Image", "cdr") => MessageKind::RosImage,
             ("sensor_msgs/msg/CameraInfo" | "sensor_msgs/CameraInfo", "cdr") => MessageKind::RosCameraInfo,
+            ("sensor_msgs/msg/CompressedImage" | "sensor_msgs/CompressedImage", "cdr") => {
+                MessageKind::RosCompressedImage
+            }
             ("foxglove.RawImage", "protobuf") => MessageKind::FoxgloveImage,
+            ("foxglove.CompressedImage", "protobuf") => MessageKind::FoxgloveCompressedImage,
             ("foxglove.CameraCalibration", "protobuf") => MessageKind::FoxgloveCalibration,
             _ => return None,
         })
     }
 }
 
-/// Decodes an image message; a Foxglove image is kept in `holder` and the view borrows it.
+/// What a decoded image view may borrow besides the message: a Foxglove raw image, or
+/// the pixels of a decompressed one (reused from message to message).
+#[derive(Debug, Default)]
+pub struct ImageHolder {
+    raw: Option<RawImage>,
+    pixels: Vec<u8>,
+}
+
+/// Decodes an image message (decompressing a compressed one into `holder`).
 pub fn decode_image<'a>(
+    kind: MessageKind,
+    data: &'a [u8],
+    holder: &'a mut ImageHolder,
+) -> Result<ImageView<'a>, String> {
+    let (stamp_ns, image) = match kind {
+        MessageKind::RosCompressedImage => {
+            let m: ros2::CompressedImage<'_> = ros2::decode(data).map_err(|e| e.to_string())?;
+            (m.header.stamp.to_ns(), decompress(&m.format, m.data, &mut holder.pixels)?)
+        }
+        MessageKind::FoxgloveCompressedImage => {
+            let m = CompressedImage::decode(data).map_err(|e| format!("protobuf: {e}"))?;
+            let stamp_ns = m.timestamp.map(|t| t.total_nanos()).unwrap_or(0);
+            (stamp_ns, decompress(&m.format, &m.data, &mut holder.pixels)?)
+        }
+        _ => return decode_raw_image(kind, data, &mut holder.raw),
+    };
+    Ok(ImageView {
+        stamp_ns,
+        width: image.width,
+        height: image.height,
+        format: image.format,
+        big_endian: image.big_endian,
+        step: image.width * image.format.bytes_per_pixel(),
+        data: &holder.pixels,
+    })
+}
+
+fn decode_raw_image<'a>(
     kind: MessageKind,
     data: &'a [u8],
     holder: &'a mut Option<RawImage>,
@@ -263,11 +309,11 @@ mod tests {
         };
         let mut bytes = Vec::new();
         ros2::encode(&image, &mut bytes).expect("encodes");
-        let err = decode_image(MessageKind::RosImage, &bytes, &mut None).expect_err("too short");
+        let err = decode_image(MessageKind::RosImage, &bytes, &mut ImageHolder::default()).expect_err("too short");
         assert!(err.contains("needs 12 bytes"), "{err}");
         let image = Image { encoding: "yuv422".into(), ..image };
         ros2::encode(&image, &mut bytes).expect("encodes");
-        let err = decode_image(MessageKind::RosImage, &bytes, &mut None).expect_err("unknown");
+        let err = decode_image(MessageKind::RosImage, &bytes, &mut ImageHolder::default()).expect_err("unknown");
         assert!(err.contains("unsupported image encoding 'yuv422'"), "{err}");
     }
 }

@@ -2,6 +2,7 @@
 //! Maps failures to typed errors that name the file; contains no algorithm.
 
 pub mod camera_file;
+pub mod compressed_image;
 pub mod frames;
 pub mod image;
 pub mod image_msg;

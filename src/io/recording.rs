@@ -2,7 +2,7 @@
 //! stamps (within 20 ms, as the TUM tools associate), with the camera from the latest
 //! calibration message. Buffers are reused from frame to frame.
 
-use super::image_msg::{MessageKind, decode_calibration, decode_image, to_depth16, to_rgb8};
+use super::image_msg::{ImageHolder, MessageKind, decode_calibration, decode_image, to_depth16, to_rgb8};
 use super::mcap_source::{McapSource, ReadMode};
 use crate::frame::RgbdFrame;
 use crate::geometry::CameraModel;
@@ -139,6 +139,8 @@ pub struct RecordingReader {
     depth: Queue<u16>,
     frame_rgb: Vec<u8>,
     frame_depth: Vec<u16>,
+    /// What a decoded image borrows (reused).
+    holder: ImageHolder,
     stats: RecordingStats,
     damage: Option<Damage>,
 }
@@ -178,6 +180,7 @@ impl RecordingReader {
             depth: Queue::new(),
             frame_rgb: Vec::new(),
             frame_depth: Vec::new(),
+            holder: ImageHolder::default(),
             stats: RecordingStats::default(),
             damage: None,
         })
@@ -328,7 +331,7 @@ impl RecordingReader {
                 topic,
                 index,
                 format!(
-                    "schema '{schema}' in encoding '{encoding}' is not read (sensor_msgs/msg/Image and CameraInfo in cdr, foxglove.RawImage and CameraCalibration in protobuf are)"
+                    "schema '{schema}' in encoding '{encoding}' is not read (sensor_msgs/msg/Image, CompressedImage and CameraInfo in cdr, foxglove.RawImage, CompressedImage and CameraCalibration in protobuf are)"
                 ),
             )
         })?;
@@ -338,8 +341,8 @@ impl RecordingReader {
                 self.camera = Some(camera);
             }
             Role::Color | Role::Depth => {
-                let mut holder = None;
-                let view = decode_image(kind, message.data, &mut holder).map_err(|e| message_error(topic, index, e))?;
+                let view =
+                    decode_image(kind, message.data, &mut self.holder).map_err(|e| message_error(topic, index, e))?;
                 let stamp_ns = if view.stamp_ns == 0 { message.log_time_ns } else { view.stamp_ns };
                 let (width, height) = (view.width, view.height);
                 let wanted_depth = matches!(role, Role::Depth);

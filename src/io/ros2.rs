@@ -55,6 +55,18 @@ pub struct Image<'a> {
     pub data: &'a [u8],
 }
 
+/// `sensor_msgs/CompressedImage`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CompressedImage<'a> {
+    /// Header.
+    pub header: Header,
+    /// `jpeg`, `png`, `rgb8; jpeg compressed bgr8`, `16UC1; compressedDepth png`, …
+    pub format: String,
+    /// The compressed image (borrowed from the message).
+    #[serde(with = "serde_bytes", borrow)]
+    pub data: &'a [u8],
+}
+
 /// `sensor_msgs/RegionOfInterest`.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct RegionOfInterest {
