@@ -46,8 +46,7 @@ pub fn decompress(format: &str, data: &[u8], out: &mut Vec<u8>) -> Result<Decomp
         return compressed_depth(format, data, out);
     }
     if data.starts_with(b"\x89PNG") {
-        let image = png_into(data, out)?;
-        return Ok(image);
+        return png_into(data, out);
     }
     if data.starts_with(&[0xFF, 0xD8]) {
         return jpeg_into(data, out);
