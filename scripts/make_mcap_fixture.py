@@ -61,9 +61,14 @@ def stamp(ns):
     return {"sec": ns // 1_000_000_000, "nanosec": ns % 1_000_000_000}
 
 
-def camera_info(header, width, height, fx, fy, cx, cy):
+def header(ns):
+    """A std_msgs/Header in the colour camera's optical frame."""
+    return {"stamp": stamp(ns), "frame_id": "camera_color_optical_frame"}
+
+
+def camera_info(msg_header, width, height, fx, fy, cx, cy):
     """A sensor_msgs/msg/CameraInfo of a pinhole camera without distortion."""
-    return {"header": header, "height": height, "width": width, "distortion_model": "plumb_bob",
+    return {"header": msg_header, "height": height, "width": width, "distortion_model": "plumb_bob",
             "d": [0.0] * 5, "k": [fx, 0, cx, 0, fy, cy, 0, 0, 1], "r": [1, 0, 0, 0, 1, 0, 0, 0, 1],
             "p": [fx, 0, cx, 0, 0, fy, cy, 0, 0, 0, 1, 0], "binning_x": 0, "binning_y": 0,
             "roi": {"x_offset": 0, "y_offset": 0, "height": 0, "width": 0, "do_rectify": False}}
@@ -86,8 +91,7 @@ def ros2(path):
         info = w.register_msgdef("sensor_msgs/msg/CameraInfo", CAMERA_INFO)
         for i in range(N):
             c_ns, d_ns = stamps(i)
-            hdr = lambda ns: {"stamp": stamp(ns), "frame_id": "camera_color_optical_frame"}
-            cam = camera_info(hdr(d_ns), W, H, FX, FY, CX, CY)
+            cam = camera_info(header(d_ns), W, H, FX, FY, CX, CY)
             rgb = bytes(x for p in colour(i) for x in p)
             bgr = bytes(x for p in colour(i) for x in reversed(p))
             mm = struct.pack("<%dH" % (W * H), *depth_mm(i))
@@ -98,31 +102,37 @@ def ros2(path):
             ]:
                 depth_topic = "/camera/depth/image_raw" if prefix.startswith("/camera") else "/alt/depth"
                 w.write_message(info_topic, info, cam, log_time=d_ns, publish_time=d_ns)
-                w.write_message(prefix, image, {"header": hdr(c_ns), "height": H, "width": W, "encoding": c_enc,
+                w.write_message(prefix, image, {"header": header(c_ns), "height": H, "width": W, "encoding": c_enc,
                                                 "is_bigendian": 0, "step": 3 * W, "data": c_data},
                                 log_time=c_ns, publish_time=c_ns)
-                w.write_message(depth_topic, image, {"header": hdr(d_ns), "height": H, "width": W,
+                w.write_message(depth_topic, image, {"header": header(d_ns), "height": H, "width": W,
                                                      "encoding": d_enc, "is_bigendian": 0, "step": d_bpp * W,
                                                      "data": d_data},
                                 log_time=d_ns, publish_time=d_ns)
         w.finish()
 
 
-def foxglove(path):
-    from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
+def foxglove_file(path, colour_message, depth_message):
+    """Frames with foxglove.CameraCalibration; `colour_message(i)` and `depth_message(i)` make
+    frame i's images (stamped here)."""
     from mcap_protobuf.writer import Writer
     with open(path, "wb") as f, Writer(f) as w:
         for i in range(N):
             c_ns, d_ns = stamps(i)
             w.write_message("/camera/color/camera_info", foxglove_calibration(d_ns), log_time=d_ns, publish_time=d_ns)
-            img = RawImage(width=W, height=H, encoding="rgb8", step=3 * W, frame_id="camera",
-                           data=bytes(x for p in colour(i) for x in p))
-            img.timestamp.FromNanoseconds(c_ns)
-            w.write_message("/camera/color/image_raw", img, log_time=c_ns, publish_time=c_ns)
-            dep = RawImage(width=W, height=H, encoding="16UC1", step=2 * W, frame_id="camera",
-                           data=struct.pack("<%dH" % (W * H), *depth_mm(i)))
-            dep.timestamp.FromNanoseconds(d_ns)
-            w.write_message("/camera/depth/image_raw", dep, log_time=d_ns, publish_time=d_ns)
+            for topic, message, ns in [("/camera/color/image_raw", colour_message(i), c_ns),
+                                       ("/camera/depth/image_raw", depth_message(i), d_ns)]:
+                message.timestamp.FromNanoseconds(ns)
+                w.write_message(topic, message, log_time=ns, publish_time=ns)
+
+
+def foxglove(path):
+    from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
+    foxglove_file(path,
+                  lambda i: RawImage(width=W, height=H, encoding="rgb8", step=3 * W, frame_id="camera",
+                                     data=bytes(x for p in colour(i) for x in p)),
+                  lambda i: RawImage(width=W, height=H, encoding="16UC1", step=2 * W, frame_id="camera",
+                                     data=struct.pack("<%dH" % (W * H), *depth_mm(i))))
 
 
 COMPRESSED_IMAGE = "std_msgs/Header header\nstring format\nuint8[] data\n" + SEP + HEADER + SEP + TIME
@@ -154,12 +164,12 @@ def png16(values):
 
 def compressed_depth(i, metres):
     # struct ConfigHeader { int32 format (INV_DEPTH = 0); float depthParam[2]; }
-    header = struct.pack("<iff", 0, QUANT_A if metres else 0.0, QUANT_B if metres else 0.0)
+    config = struct.pack("<iff", 0, QUANT_A if metres else 0.0, QUANT_B if metres else 0.0)
     if metres:
         values = [round(QUANT_A / (d / 1000.0) + QUANT_B) for d in depth_mm(i)]
     else:
         values = depth_mm(i)
-    return header + png16(values)
+    return config + png16(values)
 
 
 def ros2_compressed(path):
@@ -170,18 +180,17 @@ def ros2_compressed(path):
         info = w.register_msgdef("sensor_msgs/msg/CameraInfo", CAMERA_INFO)
         for i in range(N):
             c_ns, d_ns = stamps(i)
-            hdr = lambda ns: {"stamp": stamp(ns), "frame_id": "camera_color_optical_frame"}
-            cam = camera_info(hdr(d_ns), W, H, FX, FY, CX, CY)
+            cam = camera_info(header(d_ns), W, H, FX, FY, CX, CY)
             w.write_message("/camera/color/camera_info", info, cam, log_time=d_ns, publish_time=d_ns)
             w.write_message("/camera/color/image_raw/compressed", image,
-                            {"header": hdr(c_ns), "format": "rgb8; jpeg compressed bgr8", "data": jpeg(i)},
+                            {"header": header(c_ns), "format": "rgb8; jpeg compressed bgr8", "data": jpeg(i)},
                             log_time=c_ns, publish_time=c_ns)
             w.write_message("/camera/depth/image_raw/compressedDepth", image,
-                            {"header": hdr(d_ns), "format": "16UC1; compressedDepth png",
+                            {"header": header(d_ns), "format": "16UC1; compressedDepth png",
                              "data": compressed_depth(i, False)},
                             log_time=d_ns, publish_time=d_ns)
             w.write_message("/alt/depth/compressedDepth", image,
-                            {"header": hdr(d_ns), "format": "32FC1; compressedDepth png",
+                            {"header": header(d_ns), "format": "32FC1; compressedDepth png",
                              "data": compressed_depth(i, True)},
                             log_time=d_ns, publish_time=d_ns)
         w.finish()
@@ -189,17 +198,9 @@ def ros2_compressed(path):
 
 def foxglove_compressed(path):
     from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
-    from mcap_protobuf.writer import Writer
-    with open(path, "wb") as f, Writer(f) as w:
-        for i in range(N):
-            c_ns, d_ns = stamps(i)
-            w.write_message("/camera/color/camera_info", foxglove_calibration(d_ns), log_time=d_ns, publish_time=d_ns)
-            img = CompressedImage(frame_id="camera", format="png", data=png_rgb(i))
-            img.timestamp.FromNanoseconds(c_ns)
-            w.write_message("/camera/color/image_raw", img, log_time=c_ns, publish_time=c_ns)
-            dep = CompressedImage(frame_id="camera", format="png", data=png16(depth_mm(i)))
-            dep.timestamp.FromNanoseconds(d_ns)
-            w.write_message("/camera/depth/image_raw", dep, log_time=d_ns, publish_time=d_ns)
+    foxglove_file(path,
+                  lambda i: CompressedImage(frame_id="camera", format="png", data=png_rgb(i)),
+                  lambda i: CompressedImage(frame_id="camera", format="png", data=png16(depth_mm(i))))
 
 
 if __name__ == "__main__":

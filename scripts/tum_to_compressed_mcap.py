@@ -18,7 +18,7 @@ import io
 import struct
 from pathlib import Path
 
-from make_mcap_fixture import CAMERA_INFO, COMPRESSED_IMAGE, camera_info, stamp
+from make_mcap_fixture import CAMERA_INFO, COMPRESSED_IMAGE, camera_info, header
 
 
 def main():
@@ -55,13 +55,12 @@ def main():
             colour = Image.open(a.dataset / c_file).convert("RGB")
             depth = Image.open(a.dataset / d_file)
             width, height = colour.size
-            hdr = lambda ns: {"stamp": stamp(ns), "frame_id": "camera_color_optical_frame"}
-            cam = camera_info(hdr(d_ns), width, height, a.fx, a.fy, a.cx, a.cy)
+            cam = camera_info(header(d_ns), width, height, a.fx, a.fy, a.cx, a.cy)
             w.write_message("/camera/color/camera_info", info, cam, log_time=d_ns, publish_time=d_ns)
             jpeg = io.BytesIO()
             colour.save(jpeg, "JPEG", quality=a.quality)
             w.write_message("/camera/color/image_raw/compressed", image,
-                            {"header": hdr(c_ns), "format": "rgb8; jpeg compressed bgr8", "data": jpeg.getvalue()},
+                            {"header": header(c_ns), "format": "rgb8; jpeg compressed bgr8", "data": jpeg.getvalue()},
                             log_time=c_ns, publish_time=c_ns)
             # TUM depth is 1/5000 m; compressedDepth 16UC1 is mm (rounded).
             mm = [(v + 2) // 5 for v in depth.get_flattened_data()]
@@ -69,7 +68,7 @@ def main():
             Image.frombytes("I;16", depth.size, struct.pack("<%dH" % len(mm), *mm)).save(png, "PNG")
             data = struct.pack("<iff", 0, 0.0, 0.0) + png.getvalue()
             w.write_message("/camera/depth/image_raw/compressedDepth", image,
-                            {"header": hdr(d_ns), "format": "16UC1; compressedDepth png", "data": data},
+                            {"header": header(d_ns), "format": "16UC1; compressedDepth png", "data": data},
                             log_time=d_ns, publish_time=d_ns)
         w.finish()
     print(f"wrote {len(pairs)} frames to {a.out}")
