@@ -98,19 +98,6 @@ fn expect_err(bytes: &[u8]) -> ModelError {
     }
 }
 
-/// Recomputes the trailing CRC-32 (IEEE) so that a deliberate change passes the checksum.
-fn reseal(bytes: &mut [u8]) {
-    let n = bytes.len() - 4;
-    let mut crc = 0xFFFF_FFFFu32;
-    for &b in &bytes[..n] {
-        crc ^= b as u32;
-        for _ in 0..8 {
-            crc = if crc & 1 != 0 { (crc >> 1) ^ 0xEDB8_8320 } else { crc >> 1 };
-        }
-    }
-    bytes[n..].copy_from_slice(&(!crc).to_le_bytes());
-}
-
 #[test]
 fn damaged_files_give_errors_that_say_what_is_wrong() {
     let bytes = encode(&golden_model());
@@ -151,4 +138,30 @@ fn an_inconsistent_map_is_refused_on_load() {
     parts.surfel_nodes[0] = u32::MAX - 7;
     let e = mrsmap::map::SurfelMap::restore(parts).expect_err("bad node index");
     assert!(e.to_string().contains("inconsistent"), "{e}");
+}
+
+#[test]
+fn non_finite_statistics_are_refused_and_extreme_ones_do_not_panic() {
+    // Found by fuzzing (fuzz/model_file): a NaN in a surfel's statistics reached the
+    // eigen-decomposition of the normals and panicked there.
+    let model = golden_model();
+    for (field, value) in [(0, f64::NAN), (7, f64::INFINITY), (30, f64::NEG_INFINITY)] {
+        let mut parts = model.map.parts();
+        let s = &mut parts.stats[3];
+        if field < 6 {
+            s.sum[field] = value
+        } else {
+            s.scatter[field % 21] = value
+        }
+        let e = mrsmap::map::SurfelMap::restore(parts).expect_err("non-finite statistics");
+        assert!(e.to_string().contains("surfel 3 has non-finite statistics"), "{e}");
+    }
+    let mut parts = model.map.parts();
+    parts.view_dirs[5][1] = f32::NAN;
+    assert!(mrsmap::map::SurfelMap::restore(parts).is_err());
+    // Finite but absurd: sums whose products overflow. A map or an error, never a panic.
+    let mut parts = model.map.parts();
+    parts.stats[3].sum = [1e300; 6];
+    parts.stats[4].scatter = [-1e300; 21];
+    let _ = mrsmap::map::SurfelMap::restore(parts);
 }

@@ -31,6 +31,10 @@ pub fn symmetric_eigenvalues(a: &Matrix3<f64>) -> [f64; 3] {
     let phi = r.acos() / 3.0;
     let largest = q + 2.0 * p * phi.cos();
     let smallest = q + 2.0 * p * (phi + 2.0 * std::f64::consts::FRAC_PI_3).cos();
+    if smallest.is_nan() || largest.is_nan() {
+        // A non-finite input (NaN, or infinities that cancel): no ordering to keep.
+        return [f64::NAN; 3];
+    }
     let middle = 3.0 * q - largest - smallest;
     [smallest, middle.clamp(smallest, largest), largest]
 }
@@ -86,5 +90,17 @@ mod tests {
         let e = smallest_eigen(&(Matrix3::identity() * 2.0));
         assert_eq!(e.values, [2.0, 2.0, 2.0]);
         assert!(e.vector.is_none());
+    }
+
+    #[test]
+    fn non_finite_input_gives_no_vector_and_no_panic() {
+        // Found by fuzzing model files (fuzz/): a NaN in the statistics used to panic in
+        // the ordering of the eigenvalues.
+        let diagonal = |v: f64| Matrix3::from_diagonal(&Vector3::new(v, 1.0, 2.0));
+        for a in [diagonal(f64::NAN), diagonal(f64::INFINITY), Matrix3::repeat(f64::NEG_INFINITY)] {
+            let e = smallest_eigen(&a);
+            assert!(e.vector.is_none(), "{a}");
+            assert!(e.values.iter().any(|v| !v.is_finite()), "{a}");
+        }
     }
 }

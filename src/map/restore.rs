@@ -67,8 +67,18 @@ impl SurfelMap {
             if node as usize >= n || dir >= 6 || parts.nodes[node as usize].surfels[dir as usize] != i as u32 {
                 return err(format!("surfel {i} does not belong to its node"));
             }
-            if !parts.stats[i].count.is_finite() || parts.stats[i].count < 0.0 {
+            let stats = &parts.stats[i];
+            if !stats.count.is_finite() || stats.count < 0.0 {
                 return err(format!("surfel {i} has a bad point count"));
+            }
+            if !stats
+                .sum
+                .iter()
+                .chain(&stats.scatter)
+                .chain(parts.view_dirs[i].map(f64::from).iter())
+                .all(|v| v.is_finite())
+            {
+                return err(format!("surfel {i} has non-finite statistics or view direction"));
             }
         }
         let mut map = SurfelMap::new(parts.params, MapCapacity { nodes: n.max(1), surfels: s.max(1) })
