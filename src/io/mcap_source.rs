@@ -6,14 +6,20 @@
 //! cut off before it was finished, or an unchunked file — is streamed from the start; if
 //! it is damaged, the messages before the damage are delivered and the damage reported.
 
+use mcap::sans_io::LinearReaderOptions;
 use mcap::sans_io::indexed_reader::{IndexedReadEvent, IndexedReader, IndexedReaderOptions};
-use mcap::sans_io::summary_reader::{SummaryReadEvent, SummaryReader};
+use mcap::sans_io::summary_reader::{SummaryReadEvent, SummaryReader, SummaryReaderOptions};
 use mcap::{Channel, McapError, Summary};
 use std::collections::HashMap;
 use std::fs::File;
 use std::io::{BufReader, Read, Seek, SeekFrom};
 use std::path::Path;
 use std::sync::Arc;
+
+/// The largest record (message, or chunk compressed or not) read: 256 MiB, four times a
+/// 4096 × 4096 RGBA image, the largest image read. A damaged length field then gives an
+/// error instead of an allocation of exabytes (which aborts the process).
+pub const MAX_RECORD_BYTES: usize = 256 << 20;
 
 /// How the file is being read.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -46,6 +52,8 @@ pub struct RawMessage<'a> {
 /// lost.
 struct Indexed {
     file: File,
+    /// Bytes in the file: a chunk the index places beyond them is damaged.
+    file_len: u64,
     summary: Summary,
     topics: Vec<String>,
     reader: IndexedReader,
@@ -67,11 +75,12 @@ struct Indexed {
 type MessageKey = (u16, u32, u64, usize);
 
 impl Indexed {
-    fn new(file: File, summary: Summary, topics: &[&str]) -> Result<Self, McapError> {
+    fn new(file: File, file_len: u64, summary: Summary, topics: &[&str]) -> Result<Self, McapError> {
         let topics: Vec<String> = topics.iter().map(|t| t.to_string()).collect();
         let reader = IndexedReader::new_with_options(&summary, Self::options(&topics))?;
         Ok(Indexed {
             file,
+            file_len,
             summary,
             topics,
             reader,
@@ -85,7 +94,7 @@ impl Indexed {
     }
 
     fn options(topics: &[String]) -> IndexedReaderOptions {
-        IndexedReaderOptions::new().include_topics(topics.iter().cloned())
+        IndexedReaderOptions::new().include_topics(topics.iter().cloned()).with_record_length_limit(MAX_RECORD_BYTES)
     }
 
     fn next(&mut self, payload: &mut Vec<u8>) -> Next {
@@ -94,6 +103,9 @@ impl Indexed {
                 Err(e) => return Some(Err(e)),
                 Ok(IndexedReadEvent::ReadChunkRequest { offset, length }) => {
                     self.requested.push(offset);
+                    if offset.checked_add(length as u64).is_none_or(|end| end > self.file_len) {
+                        return Some(Err(McapError::UnexpectedEof));
+                    }
                     self.chunk.resize(length, 0);
                     let read =
                         self.file.seek(SeekFrom::Start(offset)).and_then(|_| self.file.read_exact(&mut self.chunk));
@@ -204,8 +216,9 @@ impl std::fmt::Debug for McapSource {
 }
 
 /// Reads the summary section, if the file has a usable one.
-fn read_summary(file: &mut File) -> Result<Option<Summary>, McapError> {
-    let mut reader = SummaryReader::new();
+fn read_summary(file: &mut File, file_len: u64) -> Result<Option<Summary>, McapError> {
+    let options = SummaryReaderOptions::default().with_file_size(file_len).with_record_length_limit(MAX_RECORD_BYTES);
+    let mut reader = SummaryReader::new_with_options(options);
     while let Some(event) = reader.next_event() {
         match event? {
             SummaryReadEvent::ReadRequest(n) => {
@@ -227,8 +240,9 @@ impl McapSource {
         if file.read_exact(&mut magic).is_err() || magic != *mcap::MAGIC {
             return Err(McapError::BadMagic);
         }
+        let file_len = file.metadata()?.len();
         // A missing or damaged summary is not an error: the file is streamed instead.
-        let summary = read_summary(&mut file).ok().flatten().filter(|s| !s.chunk_indexes.is_empty());
+        let summary = read_summary(&mut file, file_len).ok().flatten().filter(|s| !s.chunk_indexes.is_empty());
         let mut counts = HashMap::new();
         if let Some(s) = &summary {
             for (id, n) in s.stats.iter().flat_map(|st| st.channel_message_counts.iter()) {
@@ -237,11 +251,16 @@ impl McapSource {
                 }
             }
         }
-        let source = match summary {
-            Some(summary) => Source::Indexed(Box::new(Indexed::new(file, summary, topics)?)),
+        // An index the reader refuses (a chunk larger than any we read) counts as damaged.
+        let indexed =
+            summary.and_then(|s| file.try_clone().ok().and_then(|f| Indexed::new(f, file_len, s, topics).ok()));
+        let source = match indexed {
+            Some(indexed) => Source::Indexed(Box::new(indexed)),
             None => {
                 file.seek(SeekFrom::Start(0))?;
-                let reader = mcap::io::MessageReader::new(BufReader::with_capacity(1 << 20, file));
+                let options = LinearReaderOptions::default().with_record_length_limit(MAX_RECORD_BYTES);
+                let reader =
+                    mcap::io::MessageReader::new_with_options(BufReader::with_capacity(1 << 20, file), options);
                 Source::Streamed { reader: Box::new(reader), topics: topics.iter().map(|t| t.to_string()).collect() }
             }
         };
@@ -372,6 +391,23 @@ mod tests {
             times.push(message.log_time_ns);
         }
         (times, source.skipped_chunks().len())
+    }
+
+    #[test]
+    fn an_absurd_record_length_is_an_error_not_an_allocation() {
+        // Found by fuzzing (fuzz/mcap_recording): a damaged length field made the streaming
+        // reader reserve exabytes, and the process aborted.
+        let mut bytes = overlapping_chunks();
+        bytes.truncate(bytes.len() / 2); // no summary: streamed
+        bytes[9..17].copy_from_slice(&0x6174_6164_040a_189f_u64.to_le_bytes()); // the header record's length
+        let path = std::env::temp_dir().join(format!("mrsmap-absurd-{}.mcap", std::process::id()));
+        std::fs::write(&path, &bytes).expect("write");
+        let mut source = McapSource::open(&path, &["/t"]).expect("opens");
+        assert_eq!(source.mode(), ReadMode::Streamed);
+        let e = source.next_message().expect("an event").expect_err("damaged");
+        assert!(e.to_string().to_lowercase().contains("too large") || e.to_string().contains("length"), "{e}");
+        assert!(source.next_message().is_none());
+        let _ = std::fs::remove_file(&path);
     }
 
     #[test]
