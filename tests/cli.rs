@@ -75,6 +75,11 @@ fn errors_exit_non_zero_and_name_the_problem() {
     ]);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("/no/such/camera.toml"));
+    // A frame delta of 0 is a usage error (it used to panic in the RPE's stepping).
+    let gt = teddy_clip().join("groundtruth.txt");
+    let out = mrsmap(&["eval", "rpe", path_str(&gt), path_str(&gt), "--delta", "0"]);
+    assert_eq!(out.status.code(), Some(2), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--delta"));
 }
 
 fn path_str(p: &std::path::Path) -> &str {

@@ -220,9 +220,9 @@ pub enum EvalCommand {
         gt: PathBuf,
         /// Estimated trajectory.
         est: PathBuf,
-        /// Frame delta.
-        #[arg(long, default_value_t = 1)]
-        delta: usize,
+        /// Frame delta (1: consecutive frames, the TUM benchmark's setting).
+        #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
+        delta: u64,
         /// Maximum time difference for associating stamps (s).
         #[arg(long, default_value_t = 0.02)]
         max_diff: f64,

@@ -192,7 +192,7 @@ pub fn eval(command: EvalCommand) -> Result<()> {
         EvalCommand::Rpe { gt, est, delta, max_diff } => {
             let (g, e) = (Trajectory::read(&gt)?, Trajectory::read(&est)?);
             let (r, p) = associate(&g, &e, max_diff)?;
-            let errors = rpe_translation(&r, &p, delta)?;
+            let errors = rpe_translation(&r, &p, usize::try_from(delta)?)?;
             print_stats(&format!("RPE translation, delta {delta} frame(s)"), &ErrorStats::of(&errors));
         }
         EvalCommand::Ate { gt, est, max_diff } => {

@@ -35,6 +35,9 @@ pub enum EvalError {
         /// Poses needed.
         needed: usize,
     },
+    /// A relative pose error needs two different frames.
+    #[error("the frame delta of a relative pose error must be at least 1")]
+    ZeroDelta,
 }
 
 /// Summary statistics of per-pose errors (metres).
@@ -131,6 +134,9 @@ pub fn associate(
 
 /// Translational relative pose errors (m) at a delta of `delta` frames.
 pub fn rpe_translation(reference: &[Pose], estimate: &[Pose], delta: usize) -> Result<Vec<f64>, EvalError> {
+    if delta == 0 {
+        return Err(EvalError::ZeroDelta);
+    }
     if reference.len() <= delta {
         return Err(EvalError::TooFew { found: reference.len(), needed: delta + 1 });
     }
@@ -175,6 +181,13 @@ pub fn ate_translation(reference: &[Pose], estimate: &[Pose]) -> Result<Vec<f64>
 mod tests {
     use super::*;
     use nalgebra::{Translation3, UnitQuaternion};
+
+    #[test]
+    fn a_zero_delta_is_an_error() {
+        let poses = [Pose::identity(); 3];
+        assert_eq!(rpe_translation(&poses, &poses, 0), Err(EvalError::ZeroDelta));
+        assert_eq!(rpe_translation(&poses, &poses, 2).map(|e| e.len()), Ok(1));
+    }
 
     #[test]
     fn alignment_recovers_a_known_transform() {
