@@ -4,7 +4,9 @@
 #   scripts/fuzz.sh [SECONDS] [TARGET...]   fuzz each target for SECONDS (default 60)
 #   scripts/fuzz.sh --smoke [TARGET...]     CI: a fixed-seed run of 2000 inputs per target,
 #                                           after replaying the seeds and every input in
-#                                           fuzz/regressions/TARGET (deterministic)
+#                                           fuzz/regressions/TARGET (the same inputs on every
+#                                           run, except where rayon's thread timing changes
+#                                           the coverage tracker_frame sees)
 #
 # Targets: model_file mcap_recording image_message text_inputs tracker_frame (default: all).
 # Needs the nightly toolchain (cargo-fuzz 0.13.2 is installed if missing). A crash stops
@@ -17,7 +19,7 @@ mode=fuzz
 seconds=60
 if [[ "${1:-}" == "--smoke" ]]; then mode=smoke; shift
 elif [[ "${1:-}" =~ ^[0-9]+$ ]]; then seconds=$1; shift
-elif [[ "${1:-}" == -h || "${1:-}" == --help ]]; then sed -n 2,12p "$0"; exit 0
+elif [[ "${1:-}" == -h || "${1:-}" == --help ]]; then sed -n 2,13p "$0"; exit 0
 fi
 targets=("$@")
 [[ ${#targets[@]} -eq 0 ]] && targets=("${ALL[@]}")
