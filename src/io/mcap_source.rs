@@ -75,10 +75,8 @@ struct Indexed {
 type MessageKey = (u16, u32, u64, usize);
 
 impl Indexed {
-    fn new(file: File, file_len: u64, summary: Summary, topics: &[&str]) -> Result<Self, McapError> {
-        let topics: Vec<String> = topics.iter().map(|t| t.to_string()).collect();
-        let reader = IndexedReader::new_with_options(&summary, Self::options(&topics))?;
-        Ok(Indexed {
+    fn new(file: File, file_len: u64, summary: Summary, topics: Vec<String>, reader: IndexedReader) -> Self {
+        Indexed {
             file,
             file_len,
             summary,
@@ -90,7 +88,7 @@ impl Indexed {
             last_time: None,
             delivered_at_last: Vec::new(),
             resuming: None,
-        })
+        }
     }
 
     fn options(topics: &[String]) -> IndexedReaderOptions {
@@ -251,17 +249,19 @@ impl McapSource {
                 }
             }
         }
+        let topics: Vec<String> = topics.iter().map(|t| t.to_string()).collect();
         // An index the reader refuses (a chunk larger than any we read) counts as damaged.
-        let indexed =
-            summary.and_then(|s| file.try_clone().ok().and_then(|f| Indexed::new(f, file_len, s, topics).ok()));
+        let indexed = summary.and_then(|s| {
+            IndexedReader::new_with_options(&s, Indexed::options(&topics)).ok().map(|reader| (s, reader))
+        });
         let source = match indexed {
-            Some(indexed) => Source::Indexed(Box::new(indexed)),
+            Some((summary, reader)) => Source::Indexed(Box::new(Indexed::new(file, file_len, summary, topics, reader))),
             None => {
                 file.seek(SeekFrom::Start(0))?;
                 let options = LinearReaderOptions::default().with_record_length_limit(MAX_RECORD_BYTES);
                 let reader =
                     mcap::io::MessageReader::new_with_options(BufReader::with_capacity(1 << 20, file), options);
-                Source::Streamed { reader: Box::new(reader), topics: topics.iter().map(|t| t.to_string()).collect() }
+                Source::Streamed { reader: Box::new(reader), topics }
             }
         };
         let mode = match source {
