@@ -132,7 +132,7 @@ fuzz_target!(|frames: Vec<FuzzFrame>| {
     let fixture = fixture();
     let mut tracker = Tracker::new(TrackerParams::default(), WIDTH, HEIGHT, vec![fixture.model.clone()])
         .expect("a tracker for the teddy");
-    let mut out = [PoseEstimate { ..tracker.invalid_frame(0, 0) }];
+    let mut out = [tracker.invalid_frame(0, 0)];
     for f in frames.iter().take(4) {
         let m = message(fixture, f);
         match m.frame() {
