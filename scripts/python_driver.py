@@ -13,6 +13,8 @@ import iceoryx2 as iox2
 import numpy as np
 from PIL import Image
 
+LAYOUT_VERSION = 2  # docs/wire-format.md
+
 
 class FrameHeader(ctypes.Structure):
     _fields_ = [("layout_version", ctypes.c_uint32), ("width", ctypes.c_uint32),
@@ -20,7 +22,7 @@ class FrameHeader(ctypes.Structure):
                 ("capture_stamp_ns", ctypes.c_uint64), ("send_stamp_ns", ctypes.c_uint64),
                 ("sequence", ctypes.c_uint64), ("fx", ctypes.c_double), ("fy", ctypes.c_double),
                 ("cx", ctypes.c_double), ("cy", ctypes.c_double),
-                ("distortion", ctypes.c_double * 5), ("depth_scale_m", ctypes.c_double)]
+                ("distortion", ctypes.c_double * 8), ("depth_scale_m", ctypes.c_double)]
 
     @staticmethod
     def type_name() -> str:
@@ -67,7 +69,7 @@ def main() -> int:
     ap.add_argument("--service", default="mrsmap/camera0")
     ap.add_argument("--poses", default="mrsmap/poses")
     args = ap.parse_args()
-    assert ctypes.sizeof(FrameHeader) == 120 and ctypes.sizeof(ObjectPose) == 456
+    assert ctypes.sizeof(FrameHeader) == 144 and ctypes.sizeof(ObjectPose) == 456
 
     node = iox2.NodeBuilder.new().create(iox2.ServiceType.Ipc)
     name = iox2.ServiceName.new(args.service + "/rgbd/vga")
@@ -92,8 +94,8 @@ def main() -> int:
         depth = np.asarray(Image.open(depth_path), dtype=np.uint16)
         sample = publisher.loan_uninit()
         f = ctypes.cast(sample.payload_ptr, ctypes.POINTER(RgbdFrameVga)).contents
-        f.header = FrameHeader(1, 640, 480, 0, stamp, time.time_ns(), seq,
-                               535.4, 539.2, 320.1, 247.6, (ctypes.c_double * 5)(), 1 / 5000)
+        f.header = FrameHeader(LAYOUT_VERSION, 640, 480, 0, stamp, time.time_ns(), seq,
+                               535.4, 539.2, 320.1, 247.6, (ctypes.c_double * 8)(), 1 / 5000)
         np.ctypeslib.as_array(f.rgb)[:] = rgb.reshape(-1)
         np.ctypeslib.as_array(f.depth)[:] = depth.reshape(-1)
         sample.assume_init().send()

@@ -358,22 +358,28 @@ fn a_truncated_recording_replays_up_to_the_damage() {
 #[test]
 fn a_recording_written_by_mrsmap_reads_back() {
     let dir = temp_dir("mcap-roundtrip");
-    let path = dir.join("frames.mcap");
-    let mut file = McapFile::create(&path, mcap::Compression::Zstd).expect("create");
-    let t = RecordingTopics::default();
-    let channels =
-        FrameChannels::add(&mut file, [&t.color, &t.depth, &t.camera_info], DepthEncoding::Mm16).expect("add");
     let mut camera = vga();
     (camera.width, camera.height, camera.depth_scale_m) = (W as u32, H as u32, 1e-3);
-    let rgb = expected_rgb(1);
-    let depth = expected_depth_mm(1);
-    let frame = mrsmap::frame::RgbdFrame::new(2_000_000_000, camera, &rgb, &depth).expect("frame");
-    channels.write_frame(&mut file, &frame, 1_990_000_000, &mut Vec::new()).expect("write");
-    file.finish().expect("finish");
-    let mut reader = RecordingReader::open(&path, t, None).expect("opens");
-    let back = reader.next_frame().expect("reads").expect("a frame");
-    assert_eq!((back.stamp_ns, back.rgb, back.depth), (frame.stamp_ns, frame.rgb, frame.depth));
-    assert_eq!(back.camera, frame.camera);
+    // A pinhole, plumb_bob and rational_polynomial CameraInfo each come back as written.
+    let rational = [0.45, -2.5, 0.0007, -0.0003, 1.4, 0.33, -2.35, 1.35];
+    let plumb_bob = [0.1, -0.2, 0.001, 0.002, 0.05, 0.0, 0.0, 0.0];
+    for (i, distortion) in [mrsmap::geometry::NO_DISTORTION, plumb_bob, rational].into_iter().enumerate() {
+        let path = dir.join(format!("frames{i}.mcap"));
+        let mut file = McapFile::create(&path, mcap::Compression::Zstd).expect("create");
+        let t = RecordingTopics::default();
+        let channels =
+            FrameChannels::add(&mut file, [&t.color, &t.depth, &t.camera_info], DepthEncoding::Mm16).expect("add");
+        let camera = mrsmap::geometry::CameraModel { distortion, ..camera };
+        let rgb = expected_rgb(1);
+        let depth = expected_depth_mm(1);
+        let frame = mrsmap::frame::RgbdFrame::new(2_000_000_000, camera, &rgb, &depth).expect("frame");
+        channels.write_frame(&mut file, &frame, 1_990_000_000, &mut Vec::new()).expect("write");
+        file.finish().expect("finish");
+        let mut reader = RecordingReader::open(&path, t, None).expect("opens");
+        let back = reader.next_frame().expect("reads").expect("a frame");
+        assert_eq!((back.stamp_ns, back.rgb, back.depth), (frame.stamp_ns, frame.rgb, frame.depth));
+        assert_eq!(back.camera, frame.camera);
+    }
 }
 
 #[test]

@@ -17,7 +17,7 @@ fn tiny_camera() -> CameraModel {
         width: 80,
         height: 60,
         intrinsics: PinholeIntrinsics { fx: 66.9, fy: 67.4, cx: 40.0, cy: 30.0 },
-        distortion: [0.0; 5],
+        distortion: mrsmap::geometry::NO_DISTORTION,
         depth_scale_m: 1.0 / 5000.0,
     }
 }

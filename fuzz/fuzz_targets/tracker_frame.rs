@@ -27,7 +27,7 @@ struct Intrinsics {
     fy: f64,
     cx: f64,
     cy: f64,
-    distortion: [f64; 5],
+    distortion: [f64; 8],
     depth_scale_m: f64,
 }
 

@@ -10,7 +10,8 @@ pub struct OdometryArgs {
     /// optional groundtruth.txt).
     #[arg(long)]
     pub dataset: PathBuf,
-    /// Camera file, e.g. robot_config/cameras/tum_fr1.toml.
+    /// Camera file, e.g. robot_config/cameras/tum_fr1.toml (TOML: width, height, fx, fy, cx,
+    /// cy, depth_scale_m, and optionally distortion: 5 or 8 coefficients in OpenCV order).
     #[arg(long)]
     pub camera: PathBuf,
     /// Output trajectory (TUM format: stamp tx ty tz qx qy qz qw).
@@ -40,7 +41,8 @@ pub struct MapArgs {
     /// and the ATE in the summary).
     #[arg(long)]
     pub dataset: PathBuf,
-    /// Camera file, e.g. robot_config/cameras/tum_fr3.toml.
+    /// Camera file, e.g. robot_config/cameras/tum_fr3.toml (TOML: width, height, fx, fy, cx,
+    /// cy, depth_scale_m, and optionally distortion: 5 or 8 coefficients in OpenCV order).
     #[arg(long)]
     pub camera: PathBuf,
     /// Object description with the volume of interest, e.g. robot_config/objects/teddy.toml.

@@ -6,5 +6,5 @@ pub mod color;
 pub mod eigen3;
 pub mod se3;
 
-pub use camera::{CameraError, CameraModel, PinholeIntrinsics};
+pub use camera::{CameraError, CameraModel, DISTORTION_NAMES, Distortion, NO_DISTORTION, PinholeIntrinsics};
 pub use se3::Pose;

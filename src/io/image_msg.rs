@@ -5,7 +5,7 @@
 
 use super::compressed_image::decompress;
 use super::ros2::{self, CameraInfo, Image};
-use crate::geometry::{CameraModel, PinholeIntrinsics};
+use crate::geometry::{CameraModel, DISTORTION_NAMES, Distortion, NO_DISTORTION, PinholeIntrinsics};
 use foxglove::messages::{CameraCalibration, CompressedImage, RawImage};
 use prost::Message as _;
 
@@ -223,6 +223,33 @@ pub fn to_depth16(image: &ImageView<'_>, out: &mut Vec<u16>) -> f64 {
     if image.format == PixelFormat::DepthMm16 { 1e-3 } else { FLOAT_DEPTH_SCALE_M }
 }
 
+/// The coefficients of a ROS / Foxglove distortion model: `plumb_bob` (k1 k2 p1 p2 k3)
+/// or `rational_polynomial` (… k4 k5 k6), missing trailing coefficients zero. All-zero
+/// coefficients mean no distortion under any model name (as rectified streams publish).
+fn distortion_of(model: &str, d: &[f64]) -> Result<Distortion, String> {
+    let mut distortion = NO_DISTORTION;
+    if d.iter().all(|&c| c == 0.0) {
+        return Ok(distortion);
+    }
+    let used = match model {
+        "plumb_bob" => 5,
+        "rational_polynomial" => 8,
+        _ => {
+            return Err(format!("distortion model '{model}' is not supported (plumb_bob and rational_polynomial are)"));
+        }
+    };
+    if d.len() > used && d[used..].iter().any(|&c| c != 0.0) {
+        return Err(format!(
+            "distortion model '{model}' has {used} coefficients ({}), the message gives {} with non-zero ones beyond",
+            DISTORTION_NAMES[..used].join(" "),
+            d.len()
+        ));
+    }
+    let n = d.len().min(used);
+    distortion[..n].copy_from_slice(&d[..n]);
+    Ok(distortion)
+}
+
 /// Decodes a calibration message into a camera (depth scale left at 1 mm; the depth
 /// image's encoding sets it).
 pub fn decode_calibration(kind: MessageKind, data: &[u8]) -> Result<CameraModel, String> {
@@ -240,20 +267,7 @@ pub fn decode_calibration(kind: MessageKind, data: &[u8]) -> Result<CameraModel,
     if k.len() != 9 {
         return Err(format!("K has {} values, expected 9", k.len()));
     }
-    let mut distortion = [0.0; 5];
-    let nonzero = d.iter().any(|&c| c != 0.0);
-    if nonzero {
-        if !matches!(model.as_str(), "plumb_bob" | "rational_polynomial")
-            || d.len() < 5
-            || d[5..].iter().any(|&c| c != 0.0)
-        {
-            return Err(format!(
-                "distortion model '{model}' with {} coefficients is not supported (plumb_bob k1 k2 p1 p2 k3 is)",
-                d.len()
-            ));
-        }
-        distortion.copy_from_slice(&d[..5]);
-    }
+    let distortion = distortion_of(&model, &d)?;
     let camera = CameraModel {
         width,
         height,
@@ -315,5 +329,58 @@ mod tests {
         ros2::encode(&image, &mut bytes).expect("encodes");
         let err = decode_image(MessageKind::RosImage, &bytes, &mut ImageHolder::default()).expect_err("unknown");
         assert!(err.contains("unsupported image encoding 'yuv422'"), "{err}");
+    }
+
+    fn ros_camera_info(model: &str, d: Vec<f64>) -> Vec<u8> {
+        let info = CameraInfo {
+            header: ros2::Header { stamp: ros2::Time::from_ns(0), frame_id: "camera".into() },
+            height: 480,
+            width: 640,
+            distortion_model: model.into(),
+            d,
+            k: [504.2, 0.0, 321.7, 0.0, 503.8, 243.1, 0.0, 0.0, 1.0],
+            r: [0.0; 9],
+            p: [0.0; 12],
+            binning_x: 0,
+            binning_y: 0,
+            roi: ros2::RegionOfInterest::default(),
+        };
+        let mut bytes = Vec::new();
+        ros2::encode(&info, &mut bytes).expect("encodes");
+        bytes
+    }
+
+    #[test]
+    fn calibrations_give_plumb_bob_and_rational_polynomial_coefficients() {
+        let decode =
+            |model: &str, d: Vec<f64>| decode_calibration(MessageKind::RosCameraInfo, &ros_camera_info(model, d));
+        let rational = [0.45, -2.5, 0.0007, -0.0003, 1.4, 0.33, -2.35, 1.35];
+        let camera = decode("rational_polynomial", rational.to_vec()).expect("rational");
+        assert_eq!(camera.distortion, rational);
+        assert_eq!((camera.intrinsics.fx, camera.intrinsics.cy), (504.2, 243.1));
+        let plumb_bob = decode("plumb_bob", vec![0.1, -0.2, 0.001, 0.002, 0.05]).expect("plumb_bob");
+        assert_eq!(plumb_bob.distortion, [0.1, -0.2, 0.001, 0.002, 0.05, 0.0, 0.0, 0.0]);
+        // Rectified streams publish zeros under any name, or no coefficients at all.
+        assert!(!decode("equidistant", vec![0.0; 4]).expect("zeros").is_distorted());
+        assert!(!decode("", vec![]).expect("none").is_distorted());
+        let err = decode("equidistant", vec![0.1, 0.0, 0.0, 0.0]).expect_err("fisheye");
+        assert!(err.contains("'equidistant' is not supported"), "{err}");
+        let err = decode("plumb_bob", vec![0.1, 0.0, 0.0, 0.0, 0.0, 0.3]).expect_err("k4 in plumb_bob");
+        assert!(err.contains("5 coefficients (k1 k2 p1 p2 k3)"), "{err}");
+        let mut fourteen = rational.to_vec();
+        fourteen.extend([0.0, 0.0, 0.01, 0.0, 0.0, 0.0]);
+        let err = decode("rational_polynomial", fourteen).expect_err("thin prism");
+        assert!(err.contains("gives 14"), "{err}");
+        let calibration = CameraCalibration {
+            width: 640,
+            height: 480,
+            distortion_model: "rational_polynomial".into(),
+            d: rational.to_vec(),
+            k: vec![504.2, 0.0, 321.7, 0.0, 503.8, 243.1, 0.0, 0.0, 1.0],
+            ..Default::default()
+        };
+        let camera =
+            decode_calibration(MessageKind::FoxgloveCalibration, &calibration.encode_to_vec()).expect("foxglove");
+        assert_eq!(camera.distortion, rational);
     }
 }

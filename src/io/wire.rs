@@ -11,7 +11,7 @@ use iceoryx2::prelude::ZeroCopySend;
 use std::mem::MaybeUninit;
 
 /// Layout version of every message type here; a reader refuses other versions.
-pub const LAYOUT_VERSION: u32 = 1;
+pub const LAYOUT_VERSION: u32 = 2;
 
 /// What precedes the pixels of a frame.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
@@ -40,8 +40,9 @@ pub struct FrameHeader {
     pub cx: f64,
     /// Principal point y (px).
     pub cy: f64,
-    /// Brown–Conrady distortion k1, k2, p1, p2, k3 of the depth image's pixels.
-    pub distortion: [f64; 5],
+    /// Distortion of the depth image's pixels, OpenCV order `[k1, k2, p1, p2, k3, k4,
+    /// k5, k6]` (`plumb_bob` when the last three are zero; all zero when rectified).
+    pub distortion: [f64; 8],
     /// Metres per depth unit (TUM, OpenNI: 1/5000 or 1/1000).
     pub depth_scale_m: f64,
 }
@@ -321,12 +322,12 @@ mod tests {
 
     #[test]
     fn header_layout_is_fixed() {
-        assert_eq!(size_of::<FrameHeader>(), 120);
+        assert_eq!(size_of::<FrameHeader>(), 144);
         assert_eq!(align_of::<FrameHeader>(), 8);
         assert_eq!(offset_of!(FrameHeader, capture_stamp_ns), 16);
         assert_eq!(offset_of!(FrameHeader, fx), 40);
         assert_eq!(offset_of!(FrameHeader, distortion), 72);
-        assert_eq!(offset_of!(FrameHeader, depth_scale_m), 112);
+        assert_eq!(offset_of!(FrameHeader, depth_scale_m), 136);
     }
 
     #[test]
@@ -358,7 +359,7 @@ mod tests {
             width: 320,
             height: 240,
             intrinsics: PinholeIntrinsics { fx: 267.7, fy: 269.6, cx: 160.0, cy: 124.0 },
-            distortion: [0.0; 5],
+            distortion: crate::geometry::NO_DISTORTION,
             depth_scale_m: 0.0002,
         };
         let header = FrameHeader::for_camera(&camera, 77, 3);

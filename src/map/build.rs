@@ -256,7 +256,7 @@ mod tests {
             width: 320,
             height: 240,
             intrinsics: PinholeIntrinsics { fx: 268.0, fy: 270.0, cx: 160.0, cy: 124.0 },
-            distortion: [0.0; 5],
+            distortion: crate::geometry::NO_DISTORTION,
             depth_scale_m: 0.0002,
         };
         let (rgb, depth) = wall(&camera);

@@ -177,6 +177,12 @@ impl ModelExtent {
             (u_min, u_max) = (u_min.max(eu.0), u_max.min(eu.1));
             (v_min, v_max) = (v_min.max(ev.0), v_max.min(ev.1));
         }
+        if camera.is_distorted() {
+            match distorted_bounds(camera, (u_min, u_max), (v_min, v_max)) {
+                Some(b) => (u_min, u_max, v_min, v_max) = b,
+                None => return ImageRegion { gate: Some(gate), ..ImageRegion::whole(w, h) },
+            }
+        }
         let m = params.region_margin_px;
         let clamp = |x: f64, n: usize| x.clamp(0.0, n as f64) as usize;
         let span = |lo: f64, hi: f64, margin: f64, n: usize| {
@@ -184,9 +190,9 @@ impl ModelExtent {
         };
         let (cols, rows) = (span(u_min, u_max, m, w), span(v_min, v_max, m, h));
         // Only pixels within the bounds can give points the gate keeps (their rays meet
-        // the gate's box and ellipsoid); the margin serves border detection. The bounds
-        // are those of the pinhole image: with lens distortion every pixel of the region
-        // may give points.
+        // the gate's box and ellipsoid); the margin serves border detection. With lens
+        // distortion the bounds come from samples of a curved outline: every pixel of
+        // the region may give points.
         let (point_rows, point_cols) = if camera.is_distorted() {
             (rows.clone(), cols.clone())
         } else {
@@ -195,6 +201,42 @@ impl ModelExtent {
         };
         ImageRegion { rows, cols, point_rows, point_cols, gate: Some(gate) }
     }
+}
+
+/// Samples per side of the pinhole rectangle mapped through the lens.
+const DISTORTED_OUTLINE_SAMPLES: usize = 16;
+
+/// The pixel bounds of the pinhole-image rectangle `u × v` seen through the camera's
+/// lens: the lens maps the rectangle (which holds every pinhole projection of the gate)
+/// onto a region bounded by the image of its outline, sampled here; between samples the
+/// outline bends by a fraction of a pixel, which the region's margin covers. `None`
+/// where the lens model does not map the rectangle one to one (it folds within the
+/// rectangle's radius): the caller takes the whole image.
+fn distorted_bounds(camera: &CameraModel, u: (f64, f64), v: (f64, f64)) -> Option<(f64, f64, f64, f64)> {
+    let k = &camera.intrinsics;
+    let normalized = |pu: f64, pv: f64| ((pu - k.cx) / k.fx, (pv - k.cy) / k.fy);
+    let mut r2_max: f64 = 0.0;
+    for (pu, pv) in [(u.0, v.0), (u.0, v.1), (u.1, v.0), (u.1, v.1)] {
+        let (x, y) = normalized(pu, pv);
+        r2_max = r2_max.max(x * x + y * y);
+    }
+    if !camera.lens_is_monotone_within(r2_max) {
+        return None;
+    }
+    let (mut u_min, mut u_max, mut v_min, mut v_max) =
+        (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+    let n = DISTORTED_OUTLINE_SAMPLES;
+    for i in 0..=n {
+        let t = i as f64 / n as f64;
+        let (us, vs) = (u.0 + t * (u.1 - u.0), v.0 + t * (v.1 - v.0));
+        for (pu, pv) in [(us, v.0), (us, v.1), (u.0, vs), (u.1, vs)] {
+            let (x, y) = normalized(pu, pv);
+            let (xd, yd) = camera.distort(x, y);
+            let (du, dv) = (k.fx * xd + k.cx, k.fy * yd + k.cy);
+            (u_min, u_max, v_min, v_max) = (u_min.min(du), u_max.max(du), v_min.min(dv), v_max.max(dv));
+        }
+    }
+    Some((u_min, u_max, v_min, v_max))
 }
 
 #[cfg(test)]
@@ -208,7 +250,7 @@ mod tests {
             width: 640,
             height: 480,
             intrinsics: PinholeIntrinsics { fx: 500.0, fy: 500.0, cx: 320.0, cy: 240.0 },
-            distortion: [0.0; 5],
+            distortion: crate::geometry::NO_DISTORTION,
             depth_scale_m: 0.0002,
         }
     }
@@ -266,6 +308,52 @@ mod tests {
         // The camera inside the ellipsoid: no bounds.
         let inside = Pose::from_parts(Translation3::from(-mean), UnitQuaternion::identity());
         assert!(e.ellipse_bounds(&inside, &camera(), chi2).is_none());
+    }
+
+    #[test]
+    fn with_lens_distortion_the_region_holds_every_pixel_of_the_gate() {
+        // A wide rational lens (up to ~110 px of shift at the corners) and an object near
+        // the image's corner, where the pinhole bounds miss the lens's shift.
+        let lens = CameraModel { distortion: [3.2, 1.9, 0.0005, -0.0004, 0.09, 3.56, 2.98, 0.5], ..camera() };
+        let shape = VolumeShape::Box { half_extents: [0.08, 0.08, 0.08] };
+        let wide = (Vector3::repeat(-1.0), Vector3::repeat(1.0));
+        let e = ModelExtent::new(Vector3::zeros(), Matrix3::identity() * 0.004, Some(&shape), wide).expect("extent");
+        let object_from_camera = Pose::from_parts(Translation3::new(-0.42, -0.3, -0.9), UnitQuaternion::identity());
+        let params = TrackerParams { region_margin_px: 2.0, ..Default::default() };
+        let (lensed, pinhole) =
+            (e.region(&object_from_camera, &lens, &params), e.region(&object_from_camera, &camera(), &params));
+        let gate = lensed.gate.as_ref().expect("gate");
+        let camera_from_object = object_from_camera.inverse();
+        let (mut inside, mut outside_pinhole) = (0, 0);
+        for i in 0..40 {
+            for j in 0..40 {
+                for l in 0..40 {
+                    let q = Vector3::new(i as f64, j as f64, l as f64) * (0.16 / 39.0) - Vector3::repeat(0.08);
+                    let p = camera_from_object * Point3::from(q);
+                    if !gate.keeps(&p.coords.cast::<f32>()) {
+                        continue;
+                    }
+                    let Some((u, v)) = lens.project(&p) else { continue };
+                    let (u, v) = (u.round(), v.round());
+                    if u < 0.0 || v < 0.0 || u >= 640.0 || v >= 480.0 {
+                        continue;
+                    }
+                    let (u, v) = (u as usize, v as usize);
+                    inside += 1;
+                    assert!(lensed.point_cols.contains(&u) && lensed.point_rows.contains(&v), "({u}, {v}): {lensed:?}");
+                    if !(pinhole.cols.contains(&u) && pinhole.rows.contains(&v)) {
+                        outside_pinhole += 1;
+                    }
+                }
+            }
+        }
+        assert!(inside > 1000, "{inside} points in the image");
+        // Without the lens in the bounds, these pixels would be cut off.
+        assert!(outside_pinhole > 100, "the lens moves the object: {outside_pinhole} of {inside}");
+        // A lens that folds within the gate's rays: the whole image.
+        let folding = CameraModel { distortion: [-1.5, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], ..camera() };
+        let r = e.region(&object_from_camera, &folding, &params);
+        assert_eq!((r.rows, r.cols), (0..480, 0..640));
     }
 
     #[test]

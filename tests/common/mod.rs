@@ -30,7 +30,7 @@ pub fn vga() -> CameraModel {
         width: 640,
         height: 480,
         intrinsics: PinholeIntrinsics { fx: 535.4, fy: 539.2, cx: 320.1, cy: 247.6 },
-        distortion: [0.0; 5],
+        distortion: mrsmap::geometry::NO_DISTORTION,
         depth_scale_m: 1.0 / 5000.0,
     }
 }
