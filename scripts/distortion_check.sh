@@ -1,0 +1,45 @@
+#!/usr/bin/env bash
+# Lens distortion end to end, against OpenCV: fr3_teddy frames 100–199 are re-rendered by
+# OpenCV as a wide rational-polynomial lens (8 coefficients, like an Azure Kinect's
+# depth camera; up to 113 px of shift, 15 px median) by scripts/distort_dataset.py, then
+# tracked twice: with the lens model in the camera file, and with the pinhole file that
+# ignores it. Fails unless the run with the model tracks every frame at the tracking
+# guard of scripts/accuracy.sh (ATE median <= 8.5 mm) and beats the run without it
+# (docs/evaluation.md has the figures).
+#
+# Needs python3 with opencv-python-headless and numpy (installed here if missing).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+DATA=${MRSMAP_TUM:-../shared/data/tum}
+BIN=target/release/mrsmap
+[ -d "$DATA/fr3_teddy_first200" ] || { echo "distortion_check: $DATA/fr3_teddy_first200 not found (set MRSMAP_TUM)"; exit 1; }
+python3 -c 'import cv2, numpy' 2>/dev/null ||
+  python3 -m pip install --quiet --disable-pip-version-check 'opencv-python-headless==5.0.0.93' numpy >/dev/null
+cargo build --release --quiet
+OUT=$(mktemp -d)
+trap 'rm -rf "$OUT"' EXIT
+python3 scripts/distort_dataset.py "$DATA/fr3_teddy_first200" "$OUT/teddy_rational" \
+  --fx 535.4 --fy 539.2 --cx 320.1 --cy 247.6 \
+  --distortion 3.2 1.9 0.0005 -0.0004 0.09 3.56 2.98 0.5 --first 100
+status=0
+medians=()
+for cam in "$OUT/teddy_rational/camera.toml" robot_config/cameras/tum_fr3.toml; do
+  out=$($BIN track --config robot_config/tracker.toml --dataset "$OUT/teddy_rational" --camera "$cam" \
+    --start-at-ground-truth)
+  line=$(echo "$out" | grep "ATE (aligned)" | sed -E 's/^ *camera position error vs ground truth //')
+  tracked=$(echo "$out" | sed -nE 's/.* ([0-9]+) frames tracking.*/\1/p')
+  med=$(echo "$line" | sed -E 's/.*ATE \(aligned\) median ([0-9.]+) mm.*/\1/')
+  medians+=("$med")
+  if [ "$cam" = robot_config/cameras/tum_fr3.toml ]; then
+    printf 'distorted teddy 100-199, lens ignored (pinhole file): %s frames tracking, %s\n' "$tracked" "$line"
+  else
+    printf 'distorted teddy 100-199, rational_polynomial model:   %s frames tracking, %s\n' "$tracked" "$line"
+    if awk -v m="$med" -v n="$tracked" 'BEGIN {exit !(m > 8.5 || n < 93)}'; then
+      echo "  REGRESSION: guard is ATE median <= 8.5 mm with all 93 frames tracking"; status=1
+    fi
+  fi
+done
+if awk -v a="${medians[0]}" -v b="${medians[1]}" 'BEGIN {exit !(a >= b)}'; then
+  echo "  REGRESSION: the lens model does not help (ATE median ${medians[0]} mm with it, ${medians[1]} mm without)"; status=1
+fi
+exit $status
