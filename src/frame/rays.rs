@@ -97,3 +97,31 @@ impl RayTable {
         &self.rays
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::PinholeIntrinsics;
+
+    #[test]
+    fn a_lens_that_turns_back_within_the_image_is_refused() {
+        // r·(1 − 3r² + 3r⁴) falls between r ≈ 0.38 and 0.67 and rises again beyond. A
+        // corner pixel alone inverts onto that outer branch without fault; the pixels
+        // between, whose rays would cross the fold, do not invert, so the camera is
+        // refused rather than given rays that jump across the fold.
+        let camera = CameraModel {
+            width: 640,
+            height: 480,
+            intrinsics: PinholeIntrinsics { fx: 300.0, fy: 300.0, cx: 320.0, cy: 240.0 },
+            distortion: [-3.0, 3.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            depth_scale_m: 1e-3,
+        };
+        let (x, y) = camera.unproject_normalized(0.0, 0.0).expect("the corner converges");
+        assert!(x * x + y * y > 0.67 * 0.67, "outer branch: ({x}, {y})");
+        let mut table = RayTable::with_capacity(640 * 480);
+        assert!(matches!(table.ensure(&camera), Err(CameraError::NonInvertibleDistortion { .. })));
+        let pinhole = CameraModel { distortion: crate::geometry::NO_DISTORTION, ..camera };
+        table.ensure(&pinhole).expect("pinhole");
+        assert_eq!(table.rays().len(), 640 * 480);
+    }
+}
