@@ -100,7 +100,9 @@ struct Core<F: WireFrame> {
 
 impl<F: WireFrame> LiveTracker<F> {
     /// Loads the models, allocates the tracker and opens the ports. The calling thread
-    /// becomes one of the tracker's worker threads: call [`LiveTracker::run`] on it.
+    /// becomes one of the tracker's worker threads: call [`LiveTracker::run`] on it. It
+    /// stays one for good (rayon 1.13 cannot release a thread from a pool it joined), so a
+    /// thread can start one `LiveTracker`; another start on it is an error.
     pub fn start(config: &TrackerConfig) -> Result<Self> {
         let tracker = load_tracker(config, F::WIDTH as usize, F::HEIGHT as usize)?;
         // The calling thread joins the pool as worker 0, so that the parallel work it
