@@ -241,16 +241,20 @@ mod tests {
         }
     }
 
-    #[test]
-    fn unproject_inverts_project_over_the_whole_image() {
-        let cam = fr1();
-        for v in (0..480).step_by(7) {
-            for u in (0..640).step_by(7) {
+    /// Every 7th pixel of the image unprojects to a ray that projects back onto it.
+    fn assert_unproject_inverts_project(cam: &CameraModel) {
+        for v in (0..cam.height).step_by(7) {
+            for u in (0..cam.width).step_by(7) {
                 let (x, y) = cam.unproject_normalized(u as f64, v as f64).expect("invertible");
                 let (pu, pv) = cam.project(&nalgebra::Point3::new(x, y, 1.0)).unwrap();
                 assert!((pu - u as f64).abs() < 1e-6 && (pv - v as f64).abs() < 1e-6);
             }
         }
+    }
+
+    #[test]
+    fn unproject_inverts_project_over_the_whole_image() {
+        assert_unproject_inverts_project(&fr1());
     }
 
     /// A rational-polynomial camera like the wide colour cameras of time-of-flight RGB-D
@@ -296,14 +300,7 @@ mod tests {
 
     #[test]
     fn rational_model_inverts_over_the_whole_image_and_reduces_to_plumb_bob() {
-        let cam = rational();
-        for v in (0..480).step_by(7) {
-            for u in (0..640).step_by(7) {
-                let (x, y) = cam.unproject_normalized(u as f64, v as f64).expect("invertible");
-                let (pu, pv) = cam.project(&nalgebra::Point3::new(x, y, 1.0)).unwrap();
-                assert!((pu - u as f64).abs() < 1e-6 && (pv - v as f64).abs() < 1e-6);
-            }
-        }
+        assert_unproject_inverts_project(&rational());
         let plumb_bob = fr1();
         assert!(!plumb_bob.is_rational() && plumb_bob.is_distorted());
     }

@@ -143,12 +143,14 @@ impl FrameChannels {
         let (width, height) = (camera.width, camera.height);
         let header = |ns| Header { stamp: Time::from_ns(ns), frame_id: CAMERA_FRAME_ID.into() };
         let i = &camera.intrinsics;
+        let (distortion_model, coefficients) =
+            if camera.is_rational() { ("rational_polynomial", 8) } else { ("plumb_bob", 5) };
         let info = CameraInfo {
             header: header(frame.stamp_ns),
             height,
             width,
-            distortion_model: if camera.is_rational() { "rational_polynomial" } else { "plumb_bob" }.into(),
-            d: camera.distortion[..if camera.is_rational() { 8 } else { 5 }].to_vec(),
+            distortion_model: distortion_model.into(),
+            d: camera.distortion[..coefficients].to_vec(),
             k: [i.fx, 0.0, i.cx, 0.0, i.fy, i.cy, 0.0, 0.0, 1.0],
             r: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
             p: [i.fx, 0.0, i.cx, 0.0, 0.0, i.fy, i.cy, 0.0, 0.0, 0.0, 1.0, 0.0],
