@@ -4,8 +4,9 @@ mod cli;
 
 use anyhow::Result;
 use clap::Parser;
+use std::process::ExitCode;
 
-fn main() -> Result<()> {
+fn main() -> Result<ExitCode> {
     let cli = cli::Cli::parse();
     cli::run(cli.command)
 }

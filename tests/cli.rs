@@ -241,6 +241,7 @@ fn offline_tracking_every_nth_frame() {
         qvga: true,
         start_at_ground_truth: false,
         trajectory: None,
+        stop: Default::default(),
     };
     let err = mrsmap::app::track_dataset::run(&config, &job).expect_err("every 0 is refused");
     assert!(err.to_string().contains("--every"), "{err}");

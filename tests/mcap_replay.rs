@@ -126,8 +126,10 @@ fn convert_clip(dir: &Path, depth_encoding: DepthEncoding) -> PathBuf {
         topics: RecordingTopics::default(),
         first_frame: 0,
         max_frames: None,
+        stop: Default::default(),
     };
-    assert_eq!(convert(&job).expect("converts"), (8, 0));
+    let s = convert(&job).expect("converts");
+    assert_eq!((s.written, s.skipped, s.interrupted), (8, 0, None));
     out
 }
 
@@ -142,6 +144,7 @@ fn replay_job(input: &Path, out: Option<PathBuf>, trajectory: Option<PathBuf>) -
         every: 1,
         qvga: false,
         max_frames: None,
+        stop: Default::default(),
     }
 }
 
@@ -198,6 +201,7 @@ fn job_template(dir: &Path) -> mrsmap::app::track_dataset::TrackDatasetJob {
         qvga: false,
         start_at_ground_truth: false,
         trajectory: Some(dir.join("dataset.txt")),
+        stop: Default::default(),
     }
 }
 

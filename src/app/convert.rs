@@ -1,6 +1,7 @@
 //! `mrsmap convert tum-to-mcap`: a TUM RGB-D sequence as a ROS 2 MCAP recording (colour
 //! `rgb8`, depth `16UC1` in mm or `32FC1` in m, `CameraInfo`), as a robot would record it.
 
+use super::interrupt::{Interrupted, Stop};
 use super::report::progress_bar;
 use crate::geometry::CameraModel;
 use crate::io::camera_file::{parse_camera, read_camera};
@@ -32,6 +33,19 @@ pub struct ConvertJob {
     pub first_frame: usize,
     /// At most this many frames.
     pub max_frames: Option<usize>,
+    /// Stops before the next frame; the frames so far make a finished file.
+    pub stop: Stop,
+}
+
+/// What was written.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ConvertSummary {
+    /// Frames written.
+    pub written: usize,
+    /// Frames that could not be read (not written).
+    pub skipped: usize,
+    /// Set if the conversion was stopped before its last frame.
+    pub interrupted: Option<Interrupted>,
 }
 
 /// The TUM calibrations, built in for datasets named after their camera.
@@ -51,7 +65,7 @@ pub fn tum_camera_for(dataset: &Path) -> Option<CameraModel> {
 }
 
 /// Writes the recording; returns the number of frames written and skipped (unreadable).
-pub fn run(job: &ConvertJob) -> Result<(usize, usize)> {
+pub fn run(job: &ConvertJob) -> Result<ConvertSummary> {
     if job.out.exists() && !job.force {
         bail!("{} exists; pass --force to replace it", job.out.display());
     }
@@ -71,7 +85,8 @@ pub fn run(job: &ConvertJob) -> Result<(usize, usize)> {
     if frames.is_empty() {
         bail!("no frames to convert in {}", job.dataset.display());
     }
-    // Written next to the target and renamed at the end: a failed run leaves no half file.
+    // Written next to the target and renamed at the end: a failed run leaves no half
+    // file; an interrupted one a finished file of the frames so far.
     let partial = job.out.with_extension("mcap.partial");
     let mut file =
         McapFile::create(&partial, job.compression).with_context(|| format!("creating {}", partial.display()))?;
@@ -80,11 +95,18 @@ pub fn run(job: &ConvertJob) -> Result<(usize, usize)> {
     let mut loader = FrameLoader::new(camera, false);
     let mut scratch = Vec::new();
     let bar = progress_bar(frames.len() as u64, "converting");
-    let mut skipped = 0;
-    for entry in &frames {
+    let (mut written, mut skipped, mut interrupted) = (0, 0, None);
+    for (index, entry) in frames.iter().enumerate() {
+        if job.stop.requested() {
+            interrupted = Some(Interrupted { after: index, of: Some(frames.len()) });
+            break;
+        }
         bar.inc(1);
         match loader.load(entry) {
-            Ok(frame) => channels.write_frame(&mut file, &frame, entry.rgb_stamp_ns, &mut scratch)?,
+            Ok(frame) => {
+                channels.write_frame(&mut file, &frame, entry.rgb_stamp_ns, &mut scratch)?;
+                written += 1;
+            }
             Err(e) => {
                 bar.suspend(|| eprintln!("warning: frame {}: {e}; not written", format_stamp(entry.depth_stamp_ns)));
                 skipped += 1;
@@ -94,5 +116,5 @@ pub fn run(job: &ConvertJob) -> Result<(usize, usize)> {
     bar.finish_and_clear();
     file.finish()?;
     std::fs::rename(&partial, &job.out).with_context(|| format!("renaming to {}", job.out.display()))?;
-    Ok((frames.len() - skipped, skipped))
+    Ok(ConvertSummary { written, skipped, interrupted })
 }

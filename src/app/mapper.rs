@@ -1,6 +1,7 @@
 //! `mrsmap map`: key-view SLAM over a TUM RGB-D dataset, fused into a model file.
 
 use super::dataset::{initial_pose, thread_pool};
+use super::interrupt::{Interrupted, Stop};
 use super::report::{percentile, progress_bar};
 use crate::eval::{ErrorStats, align_rigid, associate, ate_translation};
 use crate::geometry::Pose;
@@ -37,6 +38,9 @@ pub struct MapJob {
     pub max_frames: Option<usize>,
     /// Algorithm parameters.
     pub params: SlamParams,
+    /// Stops the frame loop before its next frame; the key views so far are optimised
+    /// and fused, and the outputs written.
+    pub stop: Stop,
 }
 
 /// Per-frame times of the SLAM stages (ms).
@@ -75,12 +79,17 @@ pub struct MapSummary {
     pub fuse_ms: f64,
     /// The fused model, if one was written.
     pub model: Option<ModelHeader>,
+    /// Where it was written: `out`, or beside it if an interrupted run would have
+    /// replaced an existing model (`<name>.interrupted.mrsm`).
+    pub model_path: Option<PathBuf>,
     /// Usable surfels per level of the model, finest first.
     pub model_surfels: Vec<usize>,
     /// ATE against ground truth, if the dataset has it.
     pub ate: Option<ErrorStats>,
     /// Warnings worth repeating at the end.
     pub warnings: Vec<String>,
+    /// Set if the frame loop was stopped before its last frame.
+    pub interrupted: Option<Interrupted>,
 }
 
 /// What the frame loop leaves behind.
@@ -88,6 +97,7 @@ struct FrameLoop {
     times: StageTimes,
     skipped: usize,
     notes: String,
+    interrupted: Option<Interrupted>,
 }
 
 /// Runs SLAM, writes the trajectory and the model, and returns a summary.
@@ -159,9 +169,11 @@ pub fn run(job: &MapJob) -> Result<MapSummary> {
         finish_ms,
         fuse_ms: 0.0,
         model: None,
+        model_path: None,
         model_surfels: Vec::new(),
         ate: ate_against(&dataset, &trajectory),
         warnings,
+        interrupted: done.interrupted,
     };
     if let Some(out) = &job.out {
         let t = Instant::now();
@@ -173,8 +185,14 @@ pub fn run(job: &MapJob) -> Result<MapSummary> {
         summary.model_surfels =
             fused.map.usable_surfels_per_level().iter().copied().take(fused.map.num_levels()).collect();
         let model = Model { header, map: fused.map };
-        save(out, &model)?;
+        // An interrupted run never replaces a model that exists (even with --force).
+        let path = match done.interrupted {
+            Some(_) if out.exists() => out.with_extension("interrupted.mrsm"),
+            _ => out.clone(),
+        };
+        save(&path, &model)?;
         summary.model = Some(model.header);
+        summary.model_path = Some(path);
     }
     Ok(summary)
 }
@@ -188,8 +206,14 @@ fn process_frames(
     pool: &rayon::ThreadPool,
 ) -> Result<FrameLoop> {
     let bar = progress_bar(frames.len() as u64, "mapping");
-    let mut out = FrameLoop { times: StageTimes::default(), skipped: 0, notes: String::new() };
-    for entry in frames {
+    let mut out = FrameLoop { times: StageTimes::default(), skipped: 0, notes: String::new(), interrupted: None };
+    for (index, entry) in frames.iter().enumerate() {
+        if job.stop.requested() {
+            let interrupted = Interrupted { after: index, of: Some(frames.len()) };
+            let _ = writeln!(out.notes, "{interrupted}");
+            out.interrupted = Some(interrupted);
+            break;
+        }
         bar.inc(1);
         let stamp = format_stamp(entry.depth_stamp_ns);
         let frame = match loader.load(entry) {
@@ -245,6 +269,9 @@ fn process_frames(
     }
     bar.finish_and_clear();
     if slam.key_views.is_empty() {
+        if let Some(i) = out.interrupted {
+            bail!("{i}: no key view yet, nothing written");
+        }
         bail!("no frame of {} could be processed", job.dataset.display());
     }
     Ok(out)
@@ -368,7 +395,7 @@ pub fn print_summary(job: &MapJob, s: &MapSummary) {
             a.max * 1e3
         );
     }
-    if let (Some(h), Some(out)) = (&s.model, &job.out) {
+    if let (Some(h), Some(out)) = (&s.model, &s.model_path) {
         println!(
             "  model '{}' ({} frame): {} nodes, {} surfels, usable surfels per level (finest first) {:?}; fused in {:.0} ms → {}",
             h.name,

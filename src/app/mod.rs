@@ -7,6 +7,7 @@ pub mod capacity;
 pub mod convert;
 pub mod dataset;
 pub mod demo;
+pub mod interrupt;
 pub mod mapper;
 pub mod model_cmd;
 pub mod odometry;

@@ -1,6 +1,7 @@
 //! `mrsmap odometry`: frame-to-frame odometry over a TUM RGB-D dataset.
 
 use super::dataset::{initial_pose, thread_pool};
+use super::interrupt::{Interrupted, Stop};
 use super::report::{percentile, progress_bar};
 use crate::eval::{ErrorStats, associate, rpe_translation};
 use crate::geometry::Pose;
@@ -34,6 +35,8 @@ pub struct OdometryJob {
     pub qvga: bool,
     /// Algorithm parameters.
     pub params: OdometryParams,
+    /// Stops the run before its next frame; what was processed is written.
+    pub stop: Stop,
 }
 
 /// What happened.
@@ -53,6 +56,8 @@ pub struct OdometrySummary {
     pub register_ms: Vec<f64>,
     /// RPE against ground truth, if the dataset has it.
     pub rpe: Option<ErrorStats>,
+    /// Set if the run was stopped before its last frame.
+    pub interrupted: Option<Interrupted>,
 }
 
 /// What a run accumulates frame by frame.
@@ -77,8 +82,15 @@ impl Record {
                 build_ms: vec![],
                 register_ms: vec![],
                 rpe: None,
+                interrupted: None,
             },
         }
+    }
+
+    /// The run stops early: noted in the trajectory.
+    fn interrupt(&mut self, interrupted: Interrupted) {
+        let _ = writeln!(self.comments, "{interrupted}");
+        self.summary.interrupted = Some(interrupted);
     }
 
     /// A frame that could not be used: warn, note it in the trajectory, count it.
@@ -140,7 +152,11 @@ pub fn run(job: &OdometryJob) -> Result<OdometrySummary> {
     let pool = thread_pool(job.threads)?;
     let bar = progress_bar(frames.len() as u64, "odometry");
     let mut rec = Record::new(frames.len());
-    for entry in &frames {
+    for (index, entry) in frames.iter().enumerate() {
+        if job.stop.requested() {
+            rec.interrupt(Interrupted { after: index, of: Some(frames.len()) });
+            break;
+        }
         bar.inc(1);
         let frame = match loader.load(entry) {
             Ok(f) => f,
@@ -165,7 +181,7 @@ pub fn run(job: &OdometryJob) -> Result<OdometrySummary> {
         rec.frame(&bar, entry.depth_stamp_ns, ms, outcome, odometry.world_from_camera());
     }
     bar.finish_and_clear();
-    if rec.summary.frames == 0 {
+    if rec.summary.frames == 0 && rec.summary.interrupted.is_none() {
         bail!("no frame of {} could be processed", job.dataset.display());
     }
     write_trajectory(job, &rec.trajectory, &notes, &rec.comments)?;

@@ -2,6 +2,7 @@
 //! frame of an MCAP recording; poses out as MCAP (ROS 2 and Foxglove) and TUM trajectories.
 
 use super::dataset::thread_pool;
+use super::interrupt::{Interrupted, Stop};
 use super::poses_client::object_trajectory_path;
 use super::read_ahead::ReadAhead;
 use super::report::{percentile, progress_bar};
@@ -38,6 +39,9 @@ pub struct ReplayJob {
     pub qvga: bool,
     /// Stop after this many frames.
     pub max_frames: Option<usize>,
+    /// Stops the replay before its next frame; the poses so far are written and the
+    /// MCAP file is finished.
+    pub stop: Stop,
 }
 
 /// What happened.
@@ -58,6 +62,8 @@ pub struct ReplaySummary {
     pub damage: Option<Damage>,
     /// Damaged chunks that were skipped (indexed reading).
     pub skipped_chunks: Vec<String>,
+    /// Set if the replay was stopped before the recording's end.
+    pub interrupted: Option<Interrupted>,
 }
 
 /// Replays the recording through the tracker.
@@ -96,10 +102,15 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
         track_ms: vec![Vec::new(); names.len()],
         tracked: vec![Vec::new(); names.len()],
         frames: 0,
+        interrupted: None,
     };
-    let bar = progress_bar(reader.depth_count().unwrap_or(0), "replaying");
+    let depth_count = reader.depth_count();
+    let bar = progress_bar(depth_count.unwrap_or(0), "replaying");
     let mut frames = ReadAhead::start(reader, job.qvga).context("starting the reader thread")?;
     let result = state.replay(config, job, &mut frames, &pool, &names, output.as_mut(), &bar);
+    if let Some(i) = &mut state.interrupted {
+        i.of = depth_count.map(|n| n as usize);
+    }
     bar.finish_and_clear();
     let reader = frames.finish().context("the reader thread failed")?;
     if let (Some((file, _)), Some(partial), Some(out)) = (output, &partial, &job.out) {
@@ -109,10 +120,13 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
     if let Some(path) = &job.trajectory {
         for (k, name) in names.iter().enumerate() {
             let path = object_trajectory_path(path, name, names.len());
-            let header = format!(
+            let mut header = format!(
                 "mrsmap replay: object_from_camera of '{name}' (frames where it was tracked), stamped with depth timestamps\nrecording {}",
                 job.input.display()
             );
+            if let Some(i) = state.interrupted {
+                header.push_str(&format!("\n{i}"));
+            }
             write_trajectory(&path, &header, &state.tracked[k])?;
         }
     }
@@ -125,6 +139,7 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
         seconds: started.elapsed().as_secs_f64(),
         damage: reader.damage().cloned(),
         skipped_chunks: reader.skipped_chunks().to_vec(),
+        interrupted: state.interrupted,
     })
 }
 
@@ -135,6 +150,7 @@ struct Replay {
     track_ms: Vec<Vec<f64>>,
     tracked: Vec<Vec<(u64, Pose)>>,
     frames: usize,
+    interrupted: Option<Interrupted>,
 }
 
 impl Replay {
@@ -153,6 +169,11 @@ impl Replay {
         let mut records = Vec::with_capacity(names.len());
         while let Some(owned) = frames.next_frame() {
             let owned = owned?;
+            if job.stop.requested() {
+                self.interrupted = Some(Interrupted { after: index, of: None });
+                frames.give_back(owned);
+                break;
+            }
             bar.inc(1);
             index += 1;
             if !(index - 1).is_multiple_of(job.every) {

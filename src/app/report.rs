@@ -13,8 +13,11 @@ pub fn percentile(values: &[f64], q: f64) -> f64 {
     v[rank - 1]
 }
 
-/// A progress bar on a terminal (hidden when stderr is not one).
+/// A progress bar on a terminal (hidden when stderr is not one), after a line on stderr
+/// that says what starts and how to stop it (see `app::interrupt`).
 pub fn progress_bar(len: u64, what: &str) -> ProgressBar {
+    let count = if len > 0 { format!(" {len} frames") } else { String::new() };
+    log_line(format_args!("{what}{count} (Ctrl-C stops after the current frame and keeps what is done)"));
     let bar = ProgressBar::new(len);
     let style = ProgressStyle::with_template("{msg:12} [{bar:40}] {pos}/{len} frames  {per_sec}  eta {eta}")
         .unwrap_or_else(|_| ProgressStyle::default_bar())

@@ -2,6 +2,7 @@
 //! (every frame, no drops), with the accuracy against ground truth when it exists.
 
 use super::dataset::thread_pool;
+use super::interrupt::{Interrupted, Stop};
 use super::poses_client::object_trajectory_path;
 use super::report::{percentile, progress_bar};
 use super::tracking::{StepOutput, invalid_frame, load_tracker, track_frame};
@@ -36,6 +37,17 @@ pub struct TrackDatasetJob {
     pub start_at_ground_truth: bool,
     /// Write each object's `object_from_camera` trajectory here.
     pub trajectory: Option<PathBuf>,
+    /// Stops the run before its next frame; the frames tracked so far are written.
+    pub stop: Stop,
+}
+
+/// What happened.
+#[derive(Debug, Clone)]
+pub struct TrackDatasetSummary {
+    /// Per object.
+    pub objects: Vec<ObjectResult>,
+    /// Set if the run was stopped before its last frame.
+    pub interrupted: Option<Interrupted>,
 }
 
 /// Per-object results.
@@ -55,7 +67,7 @@ pub struct ObjectResult {
 }
 
 /// Tracks every object through the dataset.
-pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<Vec<ObjectResult>> {
+pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<TrackDatasetSummary> {
     if job.every == 0 {
         bail!("--every must be at least 1");
     }
@@ -91,7 +103,12 @@ pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<Vec<ObjectRe
         .collect();
     let mut tracked: Vec<Vec<(u64, Pose)>> = vec![Vec::new(); tracker.len()];
     let bar = progress_bar(frames.len() as u64, "tracking");
-    for entry in &frames {
+    let mut interrupted = None;
+    for (index, entry) in frames.iter().enumerate() {
+        if job.stop.requested() {
+            interrupted = Some(Interrupted { after: index, of: Some(frames.len()) });
+            break;
+        }
         bar.inc(1);
         match loader.load(entry) {
             Ok(frame) => track_frame(&mut tracker, &pool, &frame, &mut out),
@@ -127,20 +144,23 @@ pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<Vec<ObjectRe
         }
         if let Some(path) = &job.trajectory {
             let path = object_trajectory_path(path, &r.name, config.objects.len());
-            let header = format!(
+            let mut header = format!(
                 "mrsmap track: object_from_camera of '{}' (frames where it was tracked), stamped with depth timestamps\ndataset {}",
                 r.name,
                 job.dataset.display()
             );
+            if let Some(i) = interrupted {
+                header.push_str(&format!("\n{i}"));
+            }
             write_trajectory(&path, &header, &tracked[k])?;
         }
     }
-    Ok(results)
+    Ok(TrackDatasetSummary { objects: results, interrupted })
 }
 
 /// Prints the results.
-pub fn print_summary(results: &[ObjectResult]) {
-    for r in results {
+pub fn print_summary(summary: &TrackDatasetSummary) {
+    for r in &summary.objects {
         let [t, l, i, v] = r.statuses;
         println!("{}: {t} frames tracking, {l} lost, {i} initialising, {v} invalid", r.name);
         if !r.track_ms.is_empty() {

@@ -3,8 +3,10 @@
 use super::args::*;
 use anyhow::Result;
 use mrsmap::app;
+use mrsmap::app::interrupt::{INTERRUPTED_EXIT, Interrupted, Stop};
 use mrsmap::eval::{ErrorStats, associate, ate_translation, rpe_translation};
 use mrsmap::io::tum::Trajectory;
+use std::process::ExitCode;
 
 pub fn print_stats(title: &str, s: &ErrorStats) {
     println!("{title} ({} pairs/poses)", s.count);
@@ -26,8 +28,20 @@ pub fn seconds(value: Option<f64>, flag: &str) -> Result<Option<std::time::Durat
         .transpose()
 }
 
+/// The exit status of an offline command: 130 if a signal stopped it early (its
+/// outputs hold the frames before), 0 otherwise.
+fn exit_code(interrupted: Option<Interrupted>) -> ExitCode {
+    match interrupted {
+        Some(i) => {
+            eprintln!("{i}: stopped by a signal; the outputs hold the frames before it");
+            ExitCode::from(INTERRUPTED_EXIT)
+        }
+        None => ExitCode::SUCCESS,
+    }
+}
+
 /// `mrsmap track`: live, or over a dataset.
-pub fn track(a: TrackArgs) -> Result<()> {
+pub fn track(a: TrackArgs) -> Result<ExitCode> {
     let mut config = mrsmap::io::tracker_config::read_tracker_config(&a.config)?;
     if let Some(s) = a.camera_service {
         config.camera_service = s;
@@ -46,10 +60,11 @@ pub fn track(a: TrackArgs) -> Result<()> {
             qvga: a.qvga,
             start_at_ground_truth: a.start_at_ground_truth,
             trajectory: a.trajectory,
+            stop: Stop::on_signals()?,
         };
-        let results = app::track_dataset::run(&config, &job)?;
-        app::track_dataset::print_summary(&results);
-        return Ok(());
+        let summary = app::track_dataset::run(&config, &job)?;
+        app::track_dataset::print_summary(&summary);
+        return Ok(exit_code(summary.interrupted));
     }
     let limits = app::tracker_process::RunLimits {
         max_frames: a.max_frames,
@@ -58,7 +73,7 @@ pub fn track(a: TrackArgs) -> Result<()> {
     let record = a.record.map(|path| app::recorder::RecordOptions { path, last_seconds: a.record_last });
     let summary = app::tracker_process::run(&config, &limits, record.as_ref())?;
     app::tracker_process::print_summary(&config, &summary);
-    Ok(())
+    Ok(ExitCode::SUCCESS)
 }
 
 /// Default odometry parameters with the map resolution factor λ.
@@ -70,7 +85,7 @@ pub fn odometry_params(lambda: f64) -> mrsmap::odometry::OdometryParams {
 }
 
 /// `mrsmap odometry`.
-pub fn odometry(a: OdometryArgs) -> Result<()> {
+pub fn odometry(a: OdometryArgs) -> Result<ExitCode> {
     let job = app::odometry::OdometryJob {
         dataset: a.dataset,
         camera: a.camera,
@@ -80,14 +95,15 @@ pub fn odometry(a: OdometryArgs) -> Result<()> {
         max_frames: a.max_frames,
         qvga: a.qvga,
         params: odometry_params(a.lambda),
+        stop: Stop::on_signals()?,
     };
     let summary = app::odometry::run(&job)?;
     app::odometry::print_summary(&job, &summary);
-    Ok(())
+    Ok(exit_code(summary.interrupted))
 }
 
 /// `mrsmap map`.
-pub fn map(a: MapArgs) -> Result<()> {
+pub fn map(a: MapArgs) -> Result<ExitCode> {
     let mut params = mrsmap::slam::SlamParams { seed: a.seed, ..Default::default() };
     params.map.lambda = a.lambda;
     let job = app::mapper::MapJob {
@@ -100,10 +116,11 @@ pub fn map(a: MapArgs) -> Result<()> {
         threads: a.threads,
         max_frames: a.max_frames,
         params,
+        stop: Stop::on_signals()?,
     };
     let summary = app::mapper::run(&job)?;
     app::mapper::print_summary(&job, &summary);
-    Ok(())
+    Ok(exit_code(summary.interrupted))
 }
 
 /// `mrsmap model …`.
@@ -269,7 +286,7 @@ pub fn demo(a: DemoArgs) -> Result<()> {
 }
 
 /// `mrsmap replay`.
-pub fn replay(a: ReplayArgs) -> Result<()> {
+pub fn replay(a: ReplayArgs) -> Result<ExitCode> {
     let config = mrsmap::io::tracker_config::read_tracker_config(&a.config)?;
     let camera = a.camera.as_deref().map(mrsmap::io::camera_file::read_camera).transpose()?;
     let job = app::replay::ReplayJob {
@@ -282,17 +299,18 @@ pub fn replay(a: ReplayArgs) -> Result<()> {
         every: a.every,
         qvga: a.qvga,
         max_frames: a.max_frames,
+        stop: Stop::on_signals()?,
     };
     let summary = app::replay::run(&config, &job)?;
     app::replay::print_summary(&summary);
     if let Some(out) = &job.out {
         println!("poses written to {}", out.display());
     }
-    Ok(())
+    Ok(exit_code(summary.interrupted))
 }
 
 /// `mrsmap convert`.
-pub fn convert(c: ConvertCommand) -> Result<()> {
+pub fn convert(c: ConvertCommand) -> Result<ExitCode> {
     match c {
         ConvertCommand::TumToMcap(a) => {
             let job = app::convert::ConvertJob {
@@ -309,10 +327,11 @@ pub fn convert(c: ConvertCommand) -> Result<()> {
                 topics: a.topics.topics(),
                 first_frame: a.first_frame,
                 max_frames: a.max_frames,
+                stop: Stop::on_signals()?,
             };
-            let (written, skipped) = app::convert::run(&job)?;
-            println!("{written} frames written to {} ({skipped} unreadable frames skipped)", job.out.display());
-            Ok(())
+            let s = app::convert::run(&job)?;
+            println!("{} frames written to {} ({} unreadable frames skipped)", s.written, job.out.display(), s.skipped);
+            Ok(exit_code(s.interrupted))
         }
     }
 }

@@ -6,6 +6,7 @@ mod commands;
 use anyhow::Result;
 use args::*;
 use clap::{Parser, Subcommand};
+use std::process::ExitCode;
 
 #[derive(Parser)]
 #[command(
@@ -110,19 +111,21 @@ pub enum Command {
     Bench(BenchArgs),
 }
 
-/// Runs a subcommand.
-pub fn run(command: Command) -> Result<()> {
+/// Runs a subcommand; its exit status (130: stopped early by Ctrl-C or SIGTERM, the
+/// outputs written for the frames before).
+pub fn run(command: Command) -> Result<ExitCode> {
+    let done = |r: Result<()>| r.map(|()| ExitCode::SUCCESS);
     match command {
-        Command::Demo(a) => commands::demo(a),
+        Command::Demo(a) => done(commands::demo(a)),
         Command::Odometry(a) => commands::odometry(a),
         Command::Map(a) => commands::map(a),
-        Command::Model(c) => commands::model(c),
-        Command::Camera(a) => commands::camera(a),
+        Command::Model(c) => done(commands::model(c)),
+        Command::Camera(a) => done(commands::camera(a)),
         Command::Track(a) => commands::track(a),
-        Command::Poses(a) => commands::poses(a),
+        Command::Poses(a) => done(commands::poses(a)),
         Command::Replay(a) => commands::replay(a),
         Command::Convert(c) => commands::convert(c),
-        Command::Eval(c) => commands::eval(c),
-        Command::Bench(a) => commands::bench(a),
+        Command::Eval(c) => done(commands::eval(c)),
+        Command::Bench(a) => done(commands::bench(a)),
     }
 }

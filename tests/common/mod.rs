@@ -95,6 +95,7 @@ pub fn odometry_job(dataset: PathBuf, out: PathBuf, threads: usize) -> mrsmap::a
         max_frames: None,
         qvga: false,
         params: Default::default(),
+        stop: Default::default(),
     }
 }
 
