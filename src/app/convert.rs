@@ -64,7 +64,7 @@ pub fn tum_camera_for(dataset: &Path) -> Option<CameraModel> {
     })
 }
 
-/// Writes the recording; returns the number of frames written and skipped (unreadable).
+/// Writes the recording; returns how many frames were written and skipped (unreadable).
 pub fn run(job: &ConvertJob) -> Result<ConvertSummary> {
     if job.out.exists() && !job.force {
         bail!("{} exists; pass --force to replace it", job.out.display());
@@ -97,8 +97,8 @@ pub fn run(job: &ConvertJob) -> Result<ConvertSummary> {
     let bar = progress_bar(frames.len() as u64, "converting");
     let (mut written, mut skipped, mut interrupted) = (0, 0, None);
     for (index, entry) in frames.iter().enumerate() {
-        if job.stop.requested() {
-            interrupted = Some(Interrupted { after: index, of: Some(frames.len()) });
+        interrupted = job.stop.before_frame(index, Some(frames.len()));
+        if interrupted.is_some() {
             break;
         }
         bar.inc(1);

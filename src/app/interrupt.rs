@@ -57,7 +57,12 @@ impl Stop {
         self.flag.store(true, Ordering::Relaxed);
     }
 
-    /// Whether a stop was asked for; the frame loops call it once before each frame.
+    /// Before frame `index` (from 0) of `of`: the interruption, if a stop was asked for.
+    pub fn before_frame(&self, index: usize, of: Option<usize>) -> Option<Interrupted> {
+        self.requested().then_some(Interrupted { after: index, of })
+    }
+
+    /// Whether a stop was asked for; the frame loops ask once before each frame.
     pub fn requested(&self) -> bool {
         if let Some(left) = &self.countdown
             && left.fetch_update(Ordering::Relaxed, Ordering::Relaxed, |n| n.checked_sub(1)).is_err()

@@ -208,8 +208,7 @@ fn process_frames(
     let bar = progress_bar(frames.len() as u64, "mapping");
     let mut out = FrameLoop { times: StageTimes::default(), skipped: 0, notes: String::new(), interrupted: None };
     for (index, entry) in frames.iter().enumerate() {
-        if job.stop.requested() {
-            let interrupted = Interrupted { after: index, of: Some(frames.len()) };
+        if let Some(interrupted) = job.stop.before_frame(index, Some(frames.len())) {
             let _ = writeln!(out.notes, "{interrupted}");
             out.interrupted = Some(interrupted);
             break;

@@ -153,8 +153,8 @@ pub fn run(job: &OdometryJob) -> Result<OdometrySummary> {
     let bar = progress_bar(frames.len() as u64, "odometry");
     let mut rec = Record::new(frames.len());
     for (index, entry) in frames.iter().enumerate() {
-        if job.stop.requested() {
-            rec.interrupt(Interrupted { after: index, of: Some(frames.len()) });
+        if let Some(interrupted) = job.stop.before_frame(index, Some(frames.len())) {
+            rec.interrupt(interrupted);
             break;
         }
         bar.inc(1);

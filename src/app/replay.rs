@@ -169,8 +169,8 @@ impl Replay {
         let mut records = Vec::with_capacity(names.len());
         while let Some(owned) = frames.next_frame() {
             let owned = owned?;
-            if job.stop.requested() {
-                self.interrupted = Some(Interrupted { after: index, of: None });
+            self.interrupted = job.stop.before_frame(index, None);
+            if self.interrupted.is_some() {
                 frames.give_back(owned);
                 break;
             }

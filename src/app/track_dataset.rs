@@ -105,8 +105,8 @@ pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<TrackDataset
     let bar = progress_bar(frames.len() as u64, "tracking");
     let mut interrupted = None;
     for (index, entry) in frames.iter().enumerate() {
-        if job.stop.requested() {
-            interrupted = Some(Interrupted { after: index, of: Some(frames.len()) });
+        interrupted = job.stop.before_frame(index, Some(frames.len()));
+        if interrupted.is_some() {
             break;
         }
         bar.inc(1);
