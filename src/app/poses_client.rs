@@ -1,6 +1,7 @@
 //! `mrsmap poses`: a control-stack client that reads the tracker's poses, prints them
 //! and optionally writes TUM trajectories — the example a robot integrator copies.
 
+use super::interrupt::Interrupted;
 use super::report::{log_line, percentile};
 use crate::geometry::Pose;
 use crate::io::ipc::{self, IpcError, now_ns};
@@ -186,6 +187,18 @@ fn write_trajectories(out: &Path, trajectories: &BTreeMap<String, String>) -> Re
 /// itself for one object, else `path` suffixed by the name.
 pub fn object_trajectory_path(path: &Path, name: &str, objects: usize) -> PathBuf {
     if objects == 1 { path.to_path_buf() } else { with_suffix(path, name) }
+}
+
+/// The header of object `name`'s trajectory written by an offline `command` (`track`,
+/// `replay`) from `source` (`dataset DIR`, `recording FILE`), noting an interruption.
+pub fn object_trajectory_header(command: &str, name: &str, source: &str, interrupted: Option<Interrupted>) -> String {
+    let mut header = format!(
+        "mrsmap {command}: object_from_camera of '{name}' (frames where it was tracked), stamped with depth timestamps\n{source}"
+    );
+    if let Some(i) = interrupted {
+        header.push_str(&format!("\n{i}"));
+    }
+    header
 }
 
 /// `dir/traj.txt` + `teddy` → `dir/traj.teddy.txt`.

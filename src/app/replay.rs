@@ -3,7 +3,7 @@
 
 use super::dataset::thread_pool;
 use super::interrupt::{Interrupted, Stop};
-use super::poses_client::object_trajectory_path;
+use super::poses_client::{object_trajectory_header, object_trajectory_path};
 use super::read_ahead::ReadAhead;
 use super::report::{percentile, progress_bar};
 use super::tracking::{StepOutput, load_tracker, track_frame};
@@ -118,15 +118,10 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
         std::fs::rename(partial, out).with_context(|| format!("renaming to {}", out.display()))?;
     }
     if let Some(path) = &job.trajectory {
+        let source = format!("recording {}", job.input.display());
         for (k, name) in names.iter().enumerate() {
             let path = object_trajectory_path(path, name, names.len());
-            let mut header = format!(
-                "mrsmap replay: object_from_camera of '{name}' (frames where it was tracked), stamped with depth timestamps\nrecording {}",
-                job.input.display()
-            );
-            if let Some(i) = state.interrupted {
-                header.push_str(&format!("\n{i}"));
-            }
+            let header = object_trajectory_header("replay", name, &source, state.interrupted);
             write_trajectory(&path, &header, &state.tracked[k])?;
         }
     }

@@ -3,7 +3,7 @@
 
 use super::dataset::thread_pool;
 use super::interrupt::{Interrupted, Stop};
-use super::poses_client::object_trajectory_path;
+use super::poses_client::{object_trajectory_header, object_trajectory_path};
 use super::report::{percentile, progress_bar};
 use super::tracking::{StepOutput, invalid_frame, load_tracker, track_frame};
 use crate::eval::{ErrorStats, align_rigid};
@@ -144,14 +144,8 @@ pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<TrackDataset
         }
         if let Some(path) = &job.trajectory {
             let path = object_trajectory_path(path, &r.name, config.objects.len());
-            let mut header = format!(
-                "mrsmap track: object_from_camera of '{}' (frames where it was tracked), stamped with depth timestamps\ndataset {}",
-                r.name,
-                job.dataset.display()
-            );
-            if let Some(i) = interrupted {
-                header.push_str(&format!("\n{i}"));
-            }
+            let source = format!("dataset {}", job.dataset.display());
+            let header = object_trajectory_header("track", &r.name, &source, interrupted);
             write_trajectory(&path, &header, &tracked[k])?;
         }
     }
