@@ -140,6 +140,46 @@ fn map_then_model_info_and_render() {
     assert!(err.contains("cut.mrsm") && err.contains("truncated"), "{err}");
 }
 
+/// The map tool puts its world frame on the ground truth by aligning whole poses: even
+/// three frames (camera centres 2 mm apart, on a near-straight line that leaves a
+/// positions-only alignment's rotation free) give a world frame whose camera
+/// orientations agree with the motion capture, and an object model on the fitted
+/// support plane.
+#[test]
+fn a_short_map_run_lands_in_the_ground_truth_frame() {
+    let dir = temp_dir("cli-map-short");
+    let (model, traj) = (dir.join("teddy.mrsm"), dir.join("slam.txt"));
+    let object = root().join("robot_config/objects/teddy.toml");
+    let (clip, camera) = (teddy_clip(), fr3_camera_file());
+    let out = mrsmap(&[
+        "map",
+        "--dataset",
+        path_str(&clip),
+        "--camera",
+        path_str(&camera),
+        "--object",
+        path_str(&object),
+        "--max-frames",
+        "3",
+        "--out",
+        path_str(&model),
+        "--trajectory",
+        path_str(&traj),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let estimate = mrsmap::io::tum::Trajectory::read(&traj).expect("trajectory");
+    let truth = TumDataset::open(&clip).expect("clip").groundtruth.expect("ground truth");
+    assert_eq!(estimate.poses.len(), 3);
+    for (stamp, pose) in estimate.stamps.iter().zip(&estimate.poses) {
+        let (gt, gap) = truth.nearest(*stamp).expect("ground truth near the frame");
+        assert!(gap < 0.02);
+        let degrees = pose.rotation.angle_to(&gt.rotation).to_degrees();
+        assert!(degrees < 0.5, "orientation {degrees:.2}° off the ground truth at {stamp}");
+        assert!((pose.translation.vector - gt.translation.vector).norm() < 0.01);
+    }
+    assert!(model.exists());
+}
+
 #[test]
 fn map_refuses_to_run_with_nothing_to_write_and_reports_an_empty_volume() {
     let dir = temp_dir("cli-map-empty");

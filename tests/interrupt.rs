@@ -50,9 +50,7 @@ fn map_stopped_early_fuses_its_key_views_but_never_replaces_an_existing_model() 
     let job = mrsmap::app::mapper::MapJob {
         dataset: teddy_clip(),
         camera: fr3_camera_file(),
-        // The whole scene: four frames of the clip are too short a baseline to align the
-        // trajectory's rotation with the ground truth, on which an object's volume rests.
-        object: None,
+        object: Some(root().join("robot_config/objects/teddy.toml")),
         out: Some(out.clone()),
         force: true,
         trajectory: Some(dir.join("slam.txt")),

@@ -51,7 +51,7 @@ pub struct TrackDatasetSummary {
 }
 
 /// Per-object results.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct ObjectResult {
     /// Name.
     pub name: String,
@@ -64,6 +64,8 @@ pub struct ObjectResult {
     pub ate: Option<ErrorStats>,
     /// Position error without alignment, through the model's `world_from_model`.
     pub raw: Option<ErrorStats>,
+    /// Orientation error (rad) without alignment, through the model's `world_from_model`.
+    pub raw_rotation: Option<ErrorStats>,
 }
 
 /// Tracks every object through the dataset.
@@ -96,11 +98,8 @@ pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<TrackDataset
     }
     let pool = thread_pool(config.threads)?;
     let mut out = StepOutput::new(tracker.len());
-    let mut results: Vec<ObjectResult> = tracker
-        .names()
-        .iter()
-        .map(|n| ObjectResult { name: n.clone(), statuses: [0; 4], track_ms: vec![], ate: None, raw: None })
-        .collect();
+    let mut results: Vec<ObjectResult> =
+        tracker.names().iter().map(|n| ObjectResult { name: n.clone(), ..Default::default() }).collect();
     let mut tracked: Vec<Vec<(u64, Pose)>> = vec![Vec::new(); tracker.len()];
     let bar = progress_bar(frames.len() as u64, "tracking");
     let mut interrupted = None;
@@ -141,6 +140,8 @@ pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<TrackDataset
             r.ate =
                 Some(ErrorStats::of(&x.iter().zip(&y).map(|(a, b)| (b - (rot * a + t)).norm()).collect::<Vec<_>>()));
             r.raw = Some(ErrorStats::of(&x.iter().zip(&y).map(|(a, b)| (b - a).norm()).collect::<Vec<_>>()));
+            let angles: Vec<f64> = pairs.iter().map(|(est, gt)| est.rotation.angle_to(&gt.rotation)).collect();
+            r.raw_rotation = Some(ErrorStats::of(&angles));
         }
         if let Some(path) = &job.trajectory {
             let path = object_trajectory_path(path, &r.name, config.objects.len());
@@ -164,7 +165,7 @@ pub fn print_summary(summary: &TrackDatasetSummary) {
                 percentile(&r.track_ms, 0.99)
             );
         }
-        if let (Some(a), Some(raw)) = (&r.ate, &r.raw) {
+        if let (Some(a), Some(raw), Some(angle)) = (&r.ate, &r.raw, &r.raw_rotation) {
             println!(
                 "  camera position error vs ground truth ({} frames): ATE (aligned) median {:.1} mm, max {:.1} mm, RMSE {:.1} mm; unaligned (model frame from the map) median {:.1} mm, max {:.1} mm",
                 a.count,
@@ -173,6 +174,11 @@ pub fn print_summary(summary: &TrackDatasetSummary) {
                 a.rmse * 1e3,
                 raw.median * 1e3,
                 raw.max * 1e3
+            );
+            println!(
+                "  camera orientation error vs ground truth, unaligned (model frame from the map): median {:.2}°, max {:.2}°",
+                angle.median.to_degrees(),
+                angle.max.to_degrees()
             );
         }
     }

@@ -166,6 +166,28 @@ pub fn align_rigid(x: &[Vector3<f64>], y: &[Vector3<f64>]) -> (Matrix3<f64>, Vec
     (r, my - r * mx)
 }
 
+/// The rigid transform `reference_from_estimate` that best aligns whole poses, positions
+/// and orientations: [`align_rigid`] of each camera's centre and of the three points
+/// `lever_m` ahead along its axes. An orientation error of θ then weighs as a
+/// displacement of `lever_m·θ` at the points the camera looks at, and the rotation is
+/// fixed even when the cameras' centres lie on a line (a short or straight run), where
+/// the positions alone leave it free.
+pub fn align_poses(estimate: &[Pose], reference: &[Pose], lever_m: f64) -> Pose {
+    let markers = |poses: &[Pose]| -> Vec<Vector3<f64>> {
+        poses
+            .iter()
+            .flat_map(|p| {
+                let r = p.rotation.to_rotation_matrix().into_inner();
+                let c = p.translation.vector;
+                [c, c + r.column(0) * lever_m, c + r.column(1) * lever_m, c + r.column(2) * lever_m]
+            })
+            .collect()
+    };
+    let (r, t) = align_rigid(&markers(estimate), &markers(reference));
+    let rotation = nalgebra::UnitQuaternion::from_matrix(&r);
+    Pose::from_parts(nalgebra::Translation3::from(t), rotation)
+}
+
 /// Absolute trajectory errors (m) of the positions after rigid alignment.
 pub fn ate_translation(reference: &[Pose], estimate: &[Pose]) -> Result<Vec<f64>, EvalError> {
     if reference.len() < 3 {
@@ -198,6 +220,26 @@ mod tests {
         let y: Vec<Vector3<f64>> = x.iter().map(|p| r * p + t).collect();
         let (rr, tt) = align_rigid(&x, &y);
         assert!((rr - r).norm() < 1e-9 && (tt - t).norm() < 1e-9);
+    }
+
+    #[test]
+    fn pose_alignment_fixes_the_rotation_about_a_straight_path() {
+        let truth =
+            Pose::from_parts(Translation3::new(0.5, -1.0, 2.0), UnitQuaternion::from_euler_angles(0.3, -0.2, 1.1));
+        // Camera centres on a straight line: positions leave the rotation about it free.
+        let estimate: Vec<Pose> = (0..5)
+            .map(|i| {
+                let turn = UnitQuaternion::from_euler_angles(0.01 * i as f64, 0.2, -0.05 * i as f64);
+                Pose::from_parts(Translation3::new(0.1 * i as f64, 0.0, 0.0), turn)
+            })
+            .collect();
+        let reference: Vec<Pose> = estimate.iter().map(|p| truth * p).collect();
+        let found = align_poses(&estimate, &reference, 1.0);
+        assert!((found.translation.vector - truth.translation.vector).norm() < 1e-9);
+        assert!(found.rotation.angle_to(&truth.rotation) < 1e-9);
+        // One pose is enough.
+        let one = align_poses(&estimate[2..3], &reference[2..3], 1.0);
+        assert!(one.rotation.angle_to(&truth.rotation) < 1e-9);
     }
 
     #[test]

@@ -111,7 +111,7 @@ pub fn tracker_config_text(tag: &str, tracker: &str) -> String {
     format!(
         "[camera]\nservice = \"{id}/camera\"\n[poses]\nservice = \"{id}/poses\"\n[tracker]\nthreads = 2\n{tracker}\n\
          [[object]]\nname = \"teddy\"\nmodel = \"{}\"\n\
-         camera_from_object = [0.1915, 0.1014, 1.0290, -0.24997, -0.80681, 0.51676, -0.13977]\n\
+         camera_from_object = [0.1923, 0.1253, 1.0402, -0.25098, -0.79599, 0.53327, -0.13797]\n\
          search_translation_m = 0.05\nsearch_yaw_deg = 20.0\n",
         root().join("models/teddy.mrsm").display()
     )
