@@ -181,6 +181,14 @@ pub fn run(job: &MapJob) -> Result<MapSummary> {
             .install(|| slam.fuse(object.as_ref().map(|o| &o.volume)))
             .context("fusing the key views into a model (the trajectory was written)")?;
         summary.fuse_ms = t.elapsed().as_secs_f64() * 1e3;
+        if let (Some(object), Some(volume)) = (&object, &fused.volume)
+            && let Some(tilt) = object.volume.support_tilt_rad(volume).map(f64::to_degrees)
+            && tilt > SUPPORT_TILT_WARNING_DEG
+        {
+            summary.warnings.push(format!(
+                "the support plane was fitted {tilt:.1}° from the plane of the footprint's corners: the object's frame is tilted by as much and its volume may cut the object or keep the support; map from views that see more of the support surface, or check the corners' heights"
+            ));
+        }
         let header = model_header(job, object.as_ref(), &fused, &frames_span(&trajectory), slam.key_views.len());
         summary.model_surfels =
             fused.map.usable_surfels_per_level().iter().copied().take(fused.map.num_levels()).collect();
@@ -317,6 +325,9 @@ fn model_header(
         surfels: fused.map.surfels().len() as u32,
     }
 }
+
+/// A fitted support plane this far (degrees) from the footprint's plane is reported.
+const SUPPORT_TILT_WARNING_DEG: f64 = 10.0;
 
 /// How far ahead of the camera the ground-truth alignment weighs orientations: the
 /// working distance of the objects the tool maps (the teddy stands ~1 m away), so that

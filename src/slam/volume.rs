@@ -244,6 +244,22 @@ impl VolumeSpec {
     }
 }
 
+impl VolumeSpec {
+    /// For a prism, the angle (rad) between `volume`'s fitted support plane and the plane
+    /// of the footprint's own corners; `None` for a box. A large angle means the fit
+    /// settled on another surface than the one the footprint describes (typically when
+    /// the views saw little of the support surface).
+    pub fn support_tilt_rad(&self, volume: &Volume) -> Option<f64> {
+        let VolumeSpec::Prism { footprint, .. } = self else {
+            return None;
+        };
+        let corners: Vec<Vector3<f64>> = footprint.iter().map(|c| Vector3::new(c[0], c[1], c[2])).collect();
+        let rough = least_squares_plane(&corners)?;
+        let up = volume.world_from_object.rotation * Vector3::z();
+        Some(up.dot(&rough.normal).abs().min(1.0).acos())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -270,6 +286,8 @@ mod tests {
         let v = spec.resolve(&points, &Vector3::new(0.0, 0.0, 1.0)).expect("fits");
         let up = v.world_from_object.rotation * Vector3::z();
         assert!((up - tilt * Vector3::z()).norm() < 0.01, "normal {up}");
+        let reported = spec.support_tilt_rad(&v).expect("a prism");
+        assert!((reported - 0.1).abs() < 0.01, "tilt {reported}");
         let inside = v.world_from_object.inverse() * Point3::new(0.0, 0.0, 1.2);
         assert!(v.shape.contains(&inside.coords));
         let on_plane = v.world_from_object.inverse() * Point3::from(tilt * Vector3::new(0.1, 0.1, 0.0) + Vector3::z());
