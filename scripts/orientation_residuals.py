@@ -1,0 +1,75 @@
+#!/usr/bin/env python3
+"""Per-frame orientation error of a TUM trajectory against the ground truth, in the
+camera's own axes: log(R_gtᵀ R_est) in degrees (x right, y down, z = optical axis).
+
+    scripts/orientation_residuals.py GROUNDTRUTH TRAJECTORY [--world-from-model tx ty tz qx qy qz qw]
+
+TRAJECTORY holds world_from_camera (mrsmap map --trajectory), or object_from_camera
+(mrsmap track --trajectory) with --world-from-model as `mrsmap model info` prints it.
+Poses are matched to the nearest ground-truth stamp within 0.02 s. Prints the mean and
+spread, then every 8th frame. Needs numpy (installed with evo by .ci/run).
+"""
+import argparse
+import sys
+
+import numpy as np
+
+
+def rotation(q):
+    x, y, z, w = np.asarray(q, dtype=float) / np.linalg.norm(q)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def log_deg(r):
+    angle = np.arccos(np.clip((np.trace(r) - 1) / 2, -1, 1))
+    if angle < 1e-12:
+        return np.zeros(3)
+    axis = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]]) / (2 * np.sin(angle))
+    return np.degrees(angle * axis)
+
+
+def load(path):
+    poses = []
+    with open(path) as f:
+        for number, line in enumerate(f, 1):
+            if line.startswith("#") or not line.strip():
+                continue
+            v = line.split()
+            if len(v) != 8:
+                sys.exit(f"{path}:{number}: expected 8 columns (stamp tx ty tz qx qy qz qw), got {len(v)}")
+            v = [float(x) for x in v]
+            poses.append((v[0], rotation(v[4:8])))
+    if not poses:
+        sys.exit(f"{path}: no poses")
+    return poses
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("groundtruth")
+    ap.add_argument("trajectory")
+    ap.add_argument("--world-from-model", nargs=7, type=float, metavar="V")
+    a = ap.parse_args()
+    gt = load(a.groundtruth)
+    stamps = np.array([t for t, _ in gt])
+    pre = rotation(a.world_from_model[3:]) if a.world_from_model else np.eye(3)
+    residuals = []
+    for t, r in load(a.trajectory):
+        i = int(np.argmin(abs(stamps - t)))
+        if abs(stamps[i] - t) < 0.02:
+            residuals.append(log_deg(gt[i][1].T @ pre @ r))
+    if not residuals:
+        sys.exit("no pose has a ground-truth stamp within 0.02 s")
+    r = np.array(residuals)
+    print(f"{len(r)} frames; camera-frame error (deg, x y z): mean {r.mean(0).round(2)}, "
+          f"spread {r.std(0).round(2)}, median |error| {np.median(np.linalg.norm(r, axis=1)):.2f}")
+    for k in range(0, len(r), 8):
+        print(f"  frame {k:3d}: {r[k].round(2)}")
+
+
+if __name__ == "__main__":
+    main()
