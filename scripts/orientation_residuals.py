@@ -2,12 +2,15 @@
 """Per-frame orientation error of a TUM trajectory against the ground truth, in the
 camera's own axes: log(R_gtᵀ R_est) in degrees (x right, y down, z = optical axis).
 
-    scripts/orientation_residuals.py GROUNDTRUTH TRAJECTORY [--world-from-model tx ty tz qx qy qz qw]
+    scripts/orientation_residuals.py GROUNDTRUTH TRAJECTORY [--world-from-model tx ty tz qx qy qz qw] [--fit]
 
 TRAJECTORY holds world_from_camera (mrsmap map --trajectory), or object_from_camera
 (mrsmap track --trajectory) with --world-from-model as `mrsmap model info` prints it.
 Poses are matched to the nearest ground-truth stamp within 0.02 s. Prints the mean and
-spread, then every 8th frame. Needs numpy (installed with evo by .ci/run).
+spread, then every 8th frame. With --fit, also how much of the error a fitted rotation
+of the world explains, and a world rotation together with a constant camera-side one (a
+marker-to-camera calibration error): the RMS left and the fitted rotations. Needs numpy
+(installed with evo by .ci/run).
 """
 import argparse
 import sys
@@ -48,20 +51,39 @@ def load(path):
     return poses
 
 
+def nearest_rotation(m):
+    u, _, vt = np.linalg.svd(m)
+    return u @ np.diag([1, 1, np.linalg.det(u @ vt)]) @ vt
+
+
+def fit(pairs, camera_side):
+    """World rotation `a` (and camera-side `d`) minimising Σ ‖a·R_est − R_gt·d‖² (chordal),
+    by alternating closed-form steps."""
+    a, d = np.eye(3), np.eye(3)
+    for _ in range(200):
+        a = nearest_rotation(sum(g @ d @ e.T for g, e in pairs))
+        if camera_side:
+            d = nearest_rotation(sum(g.T @ a @ e for g, e in pairs))
+    r = np.array([log_deg((g @ d).T @ a @ e) for g, e in pairs])
+    return a, d, np.sqrt((r ** 2).sum(1).mean())
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("groundtruth")
     ap.add_argument("trajectory")
     ap.add_argument("--world-from-model", nargs=7, type=float, metavar="V")
+    ap.add_argument("--fit", action="store_true", help="fit a world rotation, then also a camera-side one")
     a = ap.parse_args()
     gt = load(a.groundtruth)
     stamps = np.array([t for t, _ in gt])
     pre = rotation(a.world_from_model[3:]) if a.world_from_model else np.eye(3)
-    residuals = []
+    pairs = []
     for t, r in load(a.trajectory):
         i = int(np.argmin(abs(stamps - t)))
         if abs(stamps[i] - t) < 0.02:
-            residuals.append(log_deg(gt[i][1].T @ pre @ r))
+            pairs.append((gt[i][1], pre @ r))
+    residuals = [log_deg(g.T @ e) for g, e in pairs]
     if not residuals:
         sys.exit("no pose has a ground-truth stamp within 0.02 s")
     r = np.array(residuals)
@@ -69,6 +91,11 @@ def main():
           f"spread {r.std(0).round(2)}, median |error| {np.median(np.linalg.norm(r, axis=1)):.2f}")
     for k in range(0, len(r), 8):
         print(f"  frame {k:3d}: {r[k].round(2)}")
+    if a.fit:
+        w, _, rms = fit(pairs, False)
+        print(f"fitted world rotation {log_deg(w).round(2)}: RMS left {rms:.2f}")
+        w, d, rms = fit(pairs, True)
+        print(f"fitted world rotation {log_deg(w).round(2)} and camera-side {log_deg(d).round(2)}: RMS left {rms:.2f}")
 
 
 if __name__ == "__main__":
