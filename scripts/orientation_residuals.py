@@ -2,14 +2,16 @@
 """Per-frame orientation error of a TUM trajectory against the ground truth, in the
 camera's own axes: log(R_gtᵀ R_est) in degrees (x right, y down, z = optical axis).
 
-    scripts/orientation_residuals.py GROUNDTRUTH TRAJECTORY [--world-from-model tx ty tz qx qy qz qw] [--fit]
+    scripts/orientation_residuals.py GROUNDTRUTH TRAJECTORY [--world-from-model tx ty tz qx qy qz qw] [--fit] [--rate]
 
 TRAJECTORY holds world_from_camera (mrsmap map --trajectory), or object_from_camera
 (mrsmap track --trajectory) with --world-from-model as `mrsmap model info` prints it.
 Poses are matched to the nearest ground-truth stamp within 0.02 s. Prints the mean and
 spread, then every 8th frame. With --fit, also how much of the error a fitted rotation
 of the world explains, and a world rotation together with a constant camera-side one (a
-marker-to-camera calibration error): the RMS left and the fitted rotations. Needs numpy
+marker-to-camera calibration error): the RMS left and the fitted rotations. With --rate,
+how the errors follow the camera's angular rate (from the ground truth over ±5 samples,
+per-axis means removed): their correlation and the lag it implies. Needs numpy
 (installed with evo by .ci/run).
 """
 import argparse
@@ -74,15 +76,18 @@ def main():
     ap.add_argument("trajectory")
     ap.add_argument("--world-from-model", nargs=7, type=float, metavar="V")
     ap.add_argument("--fit", action="store_true", help="fit a world rotation, then also a camera-side one")
+    ap.add_argument("--rate", action="store_true", help="correlate the errors with the angular rate")
     a = ap.parse_args()
     gt = load(a.groundtruth)
     stamps = np.array([t for t, _ in gt])
     pre = rotation(a.world_from_model[3:]) if a.world_from_model else np.eye(3)
-    pairs = []
+    pairs, rates = [], []
     for t, r in load(a.trajectory):
         i = int(np.argmin(abs(stamps - t)))
         if abs(stamps[i] - t) < 0.02:
             pairs.append((gt[i][1], pre @ r))
+            lo, hi = max(i - 5, 0), min(i + 5, len(gt) - 1)
+            rates.append(log_deg(gt[lo][1].T @ gt[hi][1]) / max(stamps[hi] - stamps[lo], 1e-9))
     residuals = [log_deg(g.T @ e) for g, e in pairs]
     if not residuals:
         sys.exit("no pose has a ground-truth stamp within 0.02 s")
@@ -91,6 +96,12 @@ def main():
           f"spread {r.std(0).round(2)}, median |error| {np.median(np.linalg.norm(r, axis=1)):.2f}")
     for k in range(0, len(r), 8):
         print(f"  frame {k:3d}: {r[k].round(2)}")
+    if a.rate:
+        e = (r - r.mean(0)).ravel()
+        w = np.array(rates)
+        w = (w - w.mean(0)).ravel()
+        print(f"correlation with the angular rate {np.corrcoef(e, w)[0, 1]:.2f}: "
+              f"as if the estimate lagged by {-np.dot(e, w) / np.dot(w, w) * 1000:.1f} ms")
     if a.fit:
         w, _, rms = fit(pairs, False)
         print(f"fitted world rotation {log_deg(w).round(2)}: RMS left {rms:.2f}")

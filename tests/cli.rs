@@ -82,6 +82,36 @@ fn errors_exit_non_zero_and_name_the_problem() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("--delta"));
 }
 
+#[test]
+fn eval_offset_shifts_the_estimate_stamps() {
+    // The ground truth as its own estimate, 1000 s late: nothing associates without an
+    // offset; with `--offset -1000` every pose pairs with itself and the errors are zero.
+    let dir = temp_dir("cli-offset");
+    let gt = teddy_clip().join("groundtruth.txt");
+    let late = dir.join("late.txt");
+    let text = std::fs::read_to_string(&gt).expect("ground truth");
+    let shifted: String = text
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
+        .map(|l| {
+            let (stamp, rest) = l.split_once(' ').expect("stamped line");
+            format!("{:.6} {rest}\n", stamp.parse::<f64>().expect("stamp") + 1000.0)
+        })
+        .collect();
+    std::fs::write(&late, shifted).expect("write");
+    for metric in ["ate", "rpe"] {
+        let out = mrsmap(&["eval", metric, path_str(&gt), path_str(&late)]);
+        assert!(!out.status.success(), "{metric}: no stamp is within 0.02 s without the offset");
+        let out = mrsmap(&["eval", metric, path_str(&gt), path_str(&late), "--offset", "-1000"]);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(text.contains("rmse   0.0000 mm"), "{metric}: {text}");
+    }
+    let out = mrsmap(&["eval", "ate", path_str(&gt), path_str(&late), "--offset", "inf"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--offset must be a finite number"));
+}
+
 fn path_str(p: &std::path::Path) -> &str {
     p.to_str().expect("utf-8 path")
 }

@@ -228,6 +228,8 @@ pub enum EvalCommand {
         /// Maximum time difference for associating stamps (s).
         #[arg(long, default_value_t = 0.02)]
         max_diff: f64,
+        #[command(flatten)]
+        offset: OffsetArg,
     },
     /// Absolute trajectory error after rigid (Horn) alignment.
     Ate {
@@ -238,7 +240,20 @@ pub enum EvalCommand {
         /// Maximum time difference for associating stamps (s).
         #[arg(long, default_value_t = 0.02)]
         max_diff: f64,
+        #[command(flatten)]
+        offset: OffsetArg,
     },
+}
+
+/// A clock offset between the two trajectories.
+#[derive(Args)]
+pub struct OffsetArg {
+    /// Seconds added to the estimate's stamps before associating (the TUM scripts'
+    /// `--offset`, evo's `--t_offset`). The benchmark's figures use 0; a non-zero value
+    /// tests for a clock offset between the camera and the ground truth, e.g. `--offset
+    /// -0.02` compares each estimate with the ground truth 20 ms earlier.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub offset: f64,
 }
 
 #[derive(Args)]

@@ -206,20 +206,27 @@ pub fn eval(command: EvalCommand) -> Result<()> {
             let trials = app::quality_eval::run(&config, &job)?;
             app::quality_eval::print(&job, &trials, config.params.min_quality);
         }
-        EvalCommand::Rpe { gt, est, delta, max_diff } => {
-            let (g, e) = (Trajectory::read(&gt)?, Trajectory::read(&est)?);
+        EvalCommand::Rpe { gt, est, delta, max_diff, offset } => {
+            let (g, e) = (Trajectory::read(&gt)?, shifted(Trajectory::read(&est)?, offset.offset)?);
             let (r, p) = associate(&g, &e, max_diff)?;
             let errors = rpe_translation(&r, &p, usize::try_from(delta)?)?;
             print_stats(&format!("RPE translation, delta {delta} frame(s)"), &ErrorStats::of(&errors));
         }
-        EvalCommand::Ate { gt, est, max_diff } => {
-            let (g, e) = (Trajectory::read(&gt)?, Trajectory::read(&est)?);
+        EvalCommand::Ate { gt, est, max_diff, offset } => {
+            let (g, e) = (Trajectory::read(&gt)?, shifted(Trajectory::read(&est)?, offset.offset)?);
             let (r, p) = associate(&g, &e, max_diff)?;
             let errors = ate_translation(&r, &p)?;
             print_stats("ATE translation after rigid alignment", &ErrorStats::of(&errors));
         }
     }
     Ok(())
+}
+
+/// `trajectory` with `offset_s` added to every stamp.
+fn shifted(mut trajectory: Trajectory, offset_s: f64) -> Result<Trajectory> {
+    anyhow::ensure!(offset_s.is_finite(), "--offset must be a finite number of seconds, not {offset_s}");
+    trajectory.stamps.iter_mut().for_each(|t| *t += offset_s);
+    Ok(trajectory)
 }
 
 /// `mrsmap bench`.
