@@ -225,11 +225,8 @@ pub enum EvalCommand {
         /// Frame delta (1: consecutive frames, the TUM benchmark's setting).
         #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
         delta: u64,
-        /// Maximum time difference for associating stamps (s).
-        #[arg(long, default_value_t = 0.02)]
-        max_diff: f64,
         #[command(flatten)]
-        offset: OffsetArg,
+        association: AssociationArgs,
     },
     /// Absolute trajectory error after rigid (Horn) alignment.
     Ate {
@@ -237,17 +234,17 @@ pub enum EvalCommand {
         gt: PathBuf,
         /// Estimated trajectory.
         est: PathBuf,
-        /// Maximum time difference for associating stamps (s).
-        #[arg(long, default_value_t = 0.02)]
-        max_diff: f64,
         #[command(flatten)]
-        offset: OffsetArg,
+        association: AssociationArgs,
     },
 }
 
-/// A clock offset between the two trajectories.
+/// How the estimate's stamps are paired with the reference's.
 #[derive(Args)]
-pub struct OffsetArg {
+pub struct AssociationArgs {
+    /// Maximum time difference for associating stamps (s).
+    #[arg(long, default_value_t = 0.02)]
+    pub max_diff: f64,
     /// Seconds added to the estimate's stamps before associating (the TUM scripts'
     /// `--offset`, evo's `--t_offset`). The benchmark's figures use 0; a non-zero value
     /// tests for a clock offset between the camera and the ground truth, e.g. `--offset

@@ -5,7 +5,9 @@ use anyhow::Result;
 use mrsmap::app;
 use mrsmap::app::interrupt::{INTERRUPTED_EXIT, Interrupted, Stop};
 use mrsmap::eval::{ErrorStats, associate, ate_translation, rpe_translation};
+use mrsmap::geometry::Pose;
 use mrsmap::io::tum::Trajectory;
+use std::path::Path;
 use std::process::ExitCode;
 
 pub fn print_stats(title: &str, s: &ErrorStats) {
@@ -206,15 +208,13 @@ pub fn eval(command: EvalCommand) -> Result<()> {
             let trials = app::quality_eval::run(&config, &job)?;
             app::quality_eval::print(&job, &trials, config.params.min_quality);
         }
-        EvalCommand::Rpe { gt, est, delta, max_diff, offset } => {
-            let (g, e) = (Trajectory::read(&gt)?, shifted(Trajectory::read(&est)?, offset.offset)?);
-            let (r, p) = associate(&g, &e, max_diff)?;
+        EvalCommand::Rpe { gt, est, delta, association } => {
+            let (r, p) = read_associated(&gt, &est, &association)?;
             let errors = rpe_translation(&r, &p, usize::try_from(delta)?)?;
             print_stats(&format!("RPE translation, delta {delta} frame(s)"), &ErrorStats::of(&errors));
         }
-        EvalCommand::Ate { gt, est, max_diff, offset } => {
-            let (g, e) = (Trajectory::read(&gt)?, shifted(Trajectory::read(&est)?, offset.offset)?);
-            let (r, p) = associate(&g, &e, max_diff)?;
+        EvalCommand::Ate { gt, est, association } => {
+            let (r, p) = read_associated(&gt, &est, &association)?;
             let errors = ate_translation(&r, &p)?;
             print_stats("ATE translation after rigid alignment", &ErrorStats::of(&errors));
         }
@@ -222,11 +222,14 @@ pub fn eval(command: EvalCommand) -> Result<()> {
     Ok(())
 }
 
-/// `trajectory` with `offset_s` added to every stamp.
-fn shifted(mut trajectory: Trajectory, offset_s: f64) -> Result<Trajectory> {
-    anyhow::ensure!(offset_s.is_finite(), "--offset must be a finite number of seconds, not {offset_s}");
-    trajectory.stamps.iter_mut().for_each(|t| *t += offset_s);
-    Ok(trajectory)
+/// The reference's and the estimate's poses paired by stamp, the estimate's stamps
+/// shifted by `--offset` first.
+fn read_associated(gt: &Path, est: &Path, a: &AssociationArgs) -> Result<(Vec<Pose>, Vec<Pose>)> {
+    anyhow::ensure!(a.offset.is_finite(), "--offset must be a finite number of seconds, not {}", a.offset);
+    let reference = Trajectory::read(gt)?;
+    let mut estimate = Trajectory::read(est)?;
+    estimate.stamps.iter_mut().for_each(|t| *t += a.offset);
+    Ok(associate(&reference, &estimate, a.max_diff)?)
 }
 
 /// `mrsmap bench`.
