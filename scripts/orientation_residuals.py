@@ -62,7 +62,7 @@ def fit(pairs, camera_side):
     """World rotation `a` (and camera-side `d`) minimising Σ ‖a·R_est − R_gt·d‖² (chordal),
     by alternating closed-form steps."""
     a, d = np.eye(3), np.eye(3)
-    for _ in range(200):
+    for _ in range(200 if camera_side else 1):  # with d fixed, one step is the optimum
         a = nearest_rotation(sum(g @ d @ e.T for g, e in pairs))
         if camera_side:
             d = nearest_rotation(sum(g.T @ a @ e for g, e in pairs))
