@@ -282,6 +282,22 @@ fn bench_runs_on_the_shipped_clip_with_or_without_the_pose_graph() {
 }
 
 #[test]
+fn bench_times_tracking_with_the_start_up_frame_apart() {
+    let (clip, camera, config) = (teddy_clip(), fr3_camera_file(), root().join("robot_config/tracker.toml"));
+    let args = ["bench", "--dataset", path_str(&clip), "--camera", path_str(&camera), "--passes", "1"];
+    let more = ["--resolution", "qvga", "--graph-key-views", "0", "--tracking-first-frame", "0"];
+    let out = mrsmap(&[&args[..], &more[..], &["--tracking-config", path_str(&config)]].concat());
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("| per frame median / p99 (ms) | first frame (ms) |"), "{text}");
+    // Eight frames: the first after start-up apart, seven in the median and p99.
+    let row = text.lines().find(|l| l.starts_with("| QVGA 320×240 |") && l.split('|').count() == 7);
+    let cells: Vec<&str> = row.unwrap_or_else(|| panic!("no tracking row: {text}")).split('|').map(str::trim).collect();
+    assert_eq!(cells[3], "7", "{text}");
+    assert!(cells[5].parse::<f64>().is_ok_and(|ms| ms > 0.0), "{text}");
+}
+
+#[test]
 fn offline_tracking_every_nth_frame() {
     let dir = temp_dir("every");
     let traj = dir.join("traj.txt");
