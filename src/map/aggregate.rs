@@ -131,6 +131,14 @@ fn pack(level: usize, key: [i32; 3]) -> u64 {
 
 const NO_CELL: u64 = u64::MAX;
 
+/// What the aggregation reads of one pixel.
+struct Pixel<'a> {
+    depth: u16,
+    ray: &'a PixelRay,
+    flags: u8,
+    rgb: &'a [u8],
+}
+
 /// One band of rows and its aggregates.
 #[derive(Debug, Clone)]
 pub(crate) struct Band {
@@ -180,11 +188,22 @@ impl Band {
         let width = frame.width();
         let scale = frame.camera.depth_scale_m as f32;
         self.prev.iter_mut().for_each(|c| *c = (NO_CELL, NONE));
+        let cols = input.cols.clone();
         for v in self.rows.clone() {
             let first_row = v == self.rows.start;
-            for u in input.cols.clone() {
-                let idx = v * width + u;
-                let cell = self.pixel(input, idx, u, first_row, scale);
+            // The row's pixels as slices, read in step (no index checks per pixel).
+            let (start, end) = (v * width + cols.start, v * width + cols.end);
+            let pixels = frame.depth[start..end]
+                .iter()
+                .zip(&input.rays[start..end])
+                .zip(&input.flags[start..end])
+                .zip(frame.rgb[3 * start..3 * end].chunks_exact(3));
+            for (u, (((&d, ray), &flags), rgb)) in cols.clone().zip(pixels) {
+                let cell = if d == 0 {
+                    (NO_CELL, NONE)
+                } else {
+                    self.pixel(input, Pixel { depth: d, ray, flags, rgb }, u, first_row, scale)
+                };
                 self.cur[u] = cell;
             }
             std::mem::swap(&mut self.prev, &mut self.cur);
@@ -209,13 +228,10 @@ impl Band {
         }
     }
 
+    /// Aggregates one pixel with a depth reading at column `u`.
     #[inline(always)]
-    fn pixel(&mut self, input: &AggregationInput, idx: usize, u: usize, first_row: bool, scale: f32) -> (u64, u32) {
-        let d = input.frame.depth[idx];
-        if d == 0 {
-            return (NO_CELL, NONE);
-        }
-        let ray = &input.rays[idx];
+    fn pixel(&mut self, input: &AggregationInput, px: Pixel, u: usize, first_row: bool, scale: f32) -> (u64, u32) {
+        let Pixel { depth: d, ray, flags, rgb } = px;
         let z = d as f32 * scale;
         let r2 = z * z * ray.range2_factor;
         let mut level = 0;
@@ -231,7 +247,6 @@ impl Band {
         {
             return (NO_CELL, NONE);
         }
-        let flags = input.flags[idx];
         let mut dirs = if input.smooth_view_dirs { ray.near_dirs } else { 1 << ray.best_dir };
         let mut near_dirs = ray.near_dirs;
         if let Some(pl) = &input.placement {
@@ -253,7 +268,6 @@ impl Band {
         let key = [floor_i32(x * inv), floor_i32(y * inv), floor_i32(z * inv)];
         let packed = pack(level, key);
         let joined = self.neighbour_aggregate(u, &input.cols, first_row, packed);
-        let rgb = &input.frame.rgb[3 * idx..3 * idx + 3];
         let [l, a, b] = rgb8_to_lab(rgb[0], rgb[1], rgb[2]);
         let point = [x, y, z, l, a, b];
         let agg = if joined != NONE {
