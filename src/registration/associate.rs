@@ -196,7 +196,11 @@ fn associate_node(
     let cube = fresh || previous.model_node == NONE;
     if cube {
         let c = terms.rotation * center + terms.translation;
-        search.cube(&c, radius, level);
+        // A fresh pass at a pose near the previous one: the previous match is likely
+        // the best again, and visiting it first lets the distance bound skip more cells.
+        let seed = (previous.model_node != NONE)
+            .then(|| (previous.model_node, model.nodes()[previous.model_node as usize].key));
+        search.cube(&c, radius, level, seed);
     } else {
         let key = model.nodes()[previous.model_node as usize].key;
         let neighbors = model.neighbors(previous.model_node);
@@ -372,7 +376,11 @@ impl Search<'_> {
     ///
     /// Nodes are found through the parent cell containing the centre: the cube spans at
     /// most three parent cells per axis, all in that parent's 27-neighbourhood.
-    fn cube(&mut self, center: &Vector3<f64>, radius: f64, level: usize) {
+    ///
+    /// A `seed` (model node and its key, e.g. the node's previous match) inside the cube
+    /// is visited first. The order of visits changes only which cells the bound skips,
+    /// not the best match (the closest passing candidate in the cube).
+    fn cube(&mut self, center: &Vector3<f64>, radius: f64, level: usize, seed: Option<(u32, [i32; 3])>) {
         let model = self.input.terms.model;
         let k0 = model.key_of(center, level);
         // At most two cells on either side of the centre's (the radius is ≤ 2 cells; a
@@ -385,7 +393,14 @@ impl Search<'_> {
         let n = [0, 1, 2].map(|i| (hi[i] - lo[i] + 1) as usize);
         let cells = CubeCells::new(model, level, lo, k0, n);
         let j0 = [0, 1, 2].map(|i| (k0[i] - lo[i]) as usize);
-        if let Some(m) = cells.get(j0) {
+        let seed = seed.filter(|(_, k)| (0..3).all(|i| k[i] >= lo[i] && k[i] <= hi[i]));
+        let js = seed.map(|(_, k)| [0, 1, 2].map(|i| (k[i] - lo[i]) as usize));
+        if let Some((m, k)) = seed {
+            self.visit(m, k);
+        }
+        if js != Some(j0)
+            && let Some(m) = cells.get(j0)
+        {
             self.visit(m, k0);
         }
         // Per axis, the smallest squared distance of any transformed mean to each cell
@@ -419,6 +434,7 @@ impl Search<'_> {
                         continue;
                     }
                     if [a, b, c] != j0
+                        && Some([a, b, c]) != js
                         && let Some(m) = cells.get([a, b, c])
                     {
                         self.visit(m, [lo[0] + a as i32, lo[1] + b as i32, lo[2] + c as i32]);
