@@ -21,7 +21,6 @@
 //!   `Σω_k = G_k C − C G_k`, `pω_kω_l = ½Q p`, `Σω_kω_l = ½(QC + CQ) − G_kCG_l − G_lCG_k`,
 //!   `Q = G_kG_l + G_lG_k`, `G_k = [e_k]×`; translation derivatives of `Σ` vanish.
 
-use crate::geometry::se3::skew;
 use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
 
 /// The inputs of one association at the current pose.
@@ -39,10 +38,35 @@ pub(crate) struct TermInput {
     pub a: Matrix3<f64>,
 }
 
+/// The inverse and the determinant of a symmetric 3×3 matrix (its upper triangle is
+/// read), by cofactors; `None` if the determinant is zero.
+#[inline]
+fn symmetric_inverse(m: &Matrix3<f64>) -> Option<(Matrix3<f64>, f64)> {
+    let (a, b, c, d, e, f) = (m[(0, 0)], m[(0, 1)], m[(0, 2)], m[(1, 1)], m[(1, 2)], m[(2, 2)]);
+    let (c00, c01, c02) = (d * f - e * e, c * e - b * f, b * e - c * d);
+    let det = a * c00 + b * c01 + c * c02;
+    if det == 0.0 {
+        return None;
+    }
+    let inv = 1.0 / det;
+    let (i00, i01, i02) = (c00 * inv, c01 * inv, c02 * inv);
+    let (i11, i12, i22) = ((a * f - c * c) * inv, (b * c - a * e) * inv, (a * d - b * b) * inv);
+    Some((Matrix3::new(i00, i01, i02, i01, i11, i12, i02, i12, i22), det))
+}
+
+/// `R C Rᵀ` for a symmetric `C` (the upper triangle computed, mirrored).
+#[inline]
+pub(crate) fn rotate_symmetric(r: &Matrix3<f64>, c: &Matrix3<f64>) -> Matrix3<f64> {
+    let rc = r * c;
+    let entry = |i: usize, j: usize| rc[(i, 0)] * r[(j, 0)] + rc[(i, 1)] * r[(j, 1)] + rc[(i, 2)] * r[(j, 2)];
+    let (xx, xy, xz, yy, yz, zz) = (entry(0, 0), entry(0, 1), entry(0, 2), entry(1, 1), entry(1, 2), entry(2, 2));
+    Matrix3::new(xx, xy, xz, xy, yy, yz, xz, yz, zz)
+}
+
 /// `e = dᵀΣ⁻¹d`; `None` if `Σ` is singular.
 #[inline]
 pub(crate) fn mahalanobis(t: &TermInput) -> Option<f64> {
-    let s = (t.model_cov + t.c).try_inverse()?;
+    let (s, _) = symmetric_inverse(&(t.model_cov + t.c))?;
     let d = t.model_mean - t.p;
     Some(d.dot(&(s * d)))
 }
@@ -50,12 +74,11 @@ pub(crate) fn mahalanobis(t: &TermInput) -> Option<f64> {
 /// `(log det Σ, Σ⁻¹, d)`; `None` if `Σ` is not positive definite.
 #[inline]
 fn likelihood_parts(t: &TermInput) -> Option<(f64, Matrix3<f64>, Vector3<f64>)> {
-    let sigma = t.model_cov + t.c;
-    let det = sigma.determinant();
+    let (s, det) = symmetric_inverse(&(t.model_cov + t.c))?;
     if det.is_nan() || det <= 0.0 {
         return None;
     }
-    Some((det.ln(), sigma.try_inverse()?, t.model_mean - t.p))
+    Some((det.ln(), s, t.model_mean - t.p))
 }
 
 /// `e = log det Σ + dᵀΣ⁻¹d`; `None` if `Σ` is not positive definite.
@@ -66,26 +89,73 @@ pub(crate) fn likelihood_cost(t: &TermInput) -> Option<f64> {
 }
 
 /// LM stage: `(e, g, H)` with `g = JᵀΣ⁻¹d`, `H = JᵀΣ⁻¹J` (Eq. 5).
+///
+/// With `J = [−A, A[p]×]` and `Sa = AᵀΣ⁻¹A`: `H = [[Sa, −Sa[p]×], [−(Sa[p]×)ᵀ,
+/// [p]×ᵀSa[p]×]]`, `g = [−Aᵀu; [p]×ᵀAᵀu]` with `u = Σ⁻¹d`. The products with `[p]×`
+/// are written out (two terms per entry) and the symmetric blocks computed once.
 #[inline]
 pub(crate) fn lm_term(t: &TermInput) -> Option<(f64, Vector6<f64>, Matrix6<f64>)> {
-    let s = (t.model_cov + t.c).try_inverse()?;
+    let (s, _) = symmetric_inverse(&(t.model_cov + t.c))?;
     let d = t.model_mean - t.p;
     let u = s * d;
     let e = d.dot(&u);
-    // J = [−A, A [p]×]; with Sa = Aᵀ S A: H = [[Sa, −Sa[p]×], [[p]×ᵀ(−Sa)ᵀ…]], g = Jᵀu.
     let at = t.a.transpose();
     let au = at * u;
-    let sa = at * s * t.a;
-    let px = skew(&t.p);
-    let mut g = Vector6::zeros();
-    g.fixed_rows_mut::<3>(0).copy_from(&(-au));
-    g.fixed_rows_mut::<3>(3).copy_from(&(px.transpose() * au));
-    let s_px = sa * px;
-    let mut h = Matrix6::zeros();
-    h.fixed_view_mut::<3, 3>(0, 0).copy_from(&sa);
-    h.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-s_px));
-    h.fixed_view_mut::<3, 3>(3, 0).copy_from(&(-s_px.transpose()));
-    h.fixed_view_mut::<3, 3>(3, 3).copy_from(&(px.transpose() * s_px));
+    let sa = at * (s * t.a);
+    let [px, py, pz] = [t.p.x, t.p.y, t.p.z];
+    // B = Sa [p]×: column 0 = Sa (0, pz, −py)ᵀ, column 1 = Sa (−pz, 0, px)ᵀ, column 2 =
+    // Sa (py, −px, 0)ᵀ.
+    let b = Matrix3::from_fn(|i, j| match j {
+        0 => sa[(i, 1)] * pz - sa[(i, 2)] * py,
+        1 => sa[(i, 2)] * px - sa[(i, 0)] * pz,
+        _ => sa[(i, 0)] * py - sa[(i, 1)] * px,
+    });
+    // [p]×ᵀ B = −[p]× B, row by row; symmetric.
+    let rr = |i: usize, j: usize| match i {
+        0 => pz * b[(1, j)] - py * b[(2, j)],
+        1 => px * b[(2, j)] - pz * b[(0, j)],
+        _ => py * b[(0, j)] - px * b[(1, j)],
+    };
+    let (r00, r01, r02, r11, r12, r22) = (rr(0, 0), rr(0, 1), rr(0, 2), rr(1, 1), rr(1, 2), rr(2, 2));
+    let g = Vector6::new(-au.x, -au.y, -au.z, au.y * pz - au.z * py, au.z * px - au.x * pz, au.x * py - au.y * px);
+    let h = Matrix6::new(
+        sa[(0, 0)],
+        sa[(0, 1)],
+        sa[(0, 2)],
+        -b[(0, 0)],
+        -b[(0, 1)],
+        -b[(0, 2)],
+        sa[(0, 1)],
+        sa[(1, 1)],
+        sa[(1, 2)],
+        -b[(1, 0)],
+        -b[(1, 1)],
+        -b[(1, 2)],
+        sa[(0, 2)],
+        sa[(1, 2)],
+        sa[(2, 2)],
+        -b[(2, 0)],
+        -b[(2, 1)],
+        -b[(2, 2)],
+        -b[(0, 0)],
+        -b[(1, 0)],
+        -b[(2, 0)],
+        r00,
+        r01,
+        r02,
+        -b[(0, 1)],
+        -b[(1, 1)],
+        -b[(2, 1)],
+        r01,
+        r11,
+        r12,
+        -b[(0, 2)],
+        -b[(1, 2)],
+        -b[(2, 2)],
+        r02,
+        r12,
+        r22,
+    );
     Some((e, g, h))
 }
 

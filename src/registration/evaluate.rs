@@ -4,7 +4,7 @@
 //! slot, and the slots are added in index order: the result is bit-identical for any
 //! number of threads.
 
-use super::cost::{TermInput, likelihood_cost, likelihood_term, lm_term, mahalanobis};
+use super::cost::{TermInput, likelihood_cost, likelihood_term, lm_term, mahalanobis, rotate_symmetric};
 use super::params::RegistrationParams;
 use super::workspace::{Association, NODE_CHUNK, Partial};
 use crate::geometry::Pose;
@@ -68,7 +68,7 @@ impl<'a> SumInput<'a> {
         let reg = Matrix3::identity() * self.regularization[level];
         let r = &self.rotation;
         let p = r * ss.mean.cast::<f64>() + self.translation;
-        let c = r * ss.cov() * r.transpose() + reg;
+        let c = rotate_symmetric(r, &ss.cov()) + reg;
         let m = if self.interpolate {
             interpolate(self.model, a.model_node, a.model_surfel, &p, self.model.resolution(level))
         } else {
@@ -114,11 +114,13 @@ impl Interpolated {
 /// node's 27-neighbourhood whose centres are within one cell of `p` on every axis are
 /// blended with weights `wᵢ = Π (1 − |cᵢ − pᵢ| / res)`; otherwise, or if no such cell
 /// holds a usable surfel, the matched surfel itself is returned. The Jacobian of the
-/// blended mean is `Σ (μᵢ − μ) ∇wᵢᵀ / Σ wᵢ`.
+/// blended mean is `Σ (μᵢ − μ) ∇wᵢᵀ / Σ wᵢ = (Σ μᵢ∇wᵢᵀ − μ Σ∇wᵢᵀ) / Σ wᵢ`, summed in
+/// the same pass as the blend.
 pub(crate) fn interpolate(model: &SurfelMap, node: u32, surfel: u32, p: &Vector3<f64>, res: f64) -> Interpolated {
     let surfels = model.surfels();
     let matched = || Interpolated::of(&surfels[surfel as usize]);
-    let off = (p - model.node_center(&model.nodes()[node as usize])) / res;
+    let inv_res = 1.0 / res;
+    let off = (p - model.node_center(&model.nodes()[node as usize])) * inv_res;
     if off.amax() > 1.0 {
         return matched();
     }
@@ -127,8 +129,7 @@ pub(crate) fn interpolate(model: &SurfelMap, node: u32, surfel: u32, p: &Vector3
     // The covariance is symmetric: its six distinct entries are blended (packed as
     // `Surfel::cov_packed`), the same sums as the full matrix's.
     let (mut sw, mut mean, mut cov) = (0.0, Vector3::zeros(), [0.0f64; 6]);
-    let mut cells: [(f64, Vector3<f64>, Vector3<f64>); 8] = [(0.0, Vector3::zeros(), Vector3::zeros()); 8];
-    let mut n = 0;
+    let (mut mean_grad, mut grad_sum) = (Matrix3::zeros(), Vector3::zeros());
     for dx in [0, step.x] {
         for dy in [0, step.y] {
             for dz in [0, step.z] {
@@ -150,9 +151,9 @@ pub(crate) fn interpolate(model: &SurfelMap, node: u32, surfel: u32, p: &Vector3
                     // ∂w/∂p: each factor 1 − |r| falls by sign(r)/res along its axis.
                     let grad =
                         Vector3::new(-r.x.signum() * f.y * f.z, -r.y.signum() * f.x * f.z, -r.z.signum() * f.x * f.y)
-                            / res;
-                    cells[n] = (w, mu, grad);
-                    n += 1;
+                            * inv_res;
+                    mean_grad += mu * grad.transpose();
+                    grad_sum += grad;
                 }
             }
         }
@@ -160,9 +161,10 @@ pub(crate) fn interpolate(model: &SurfelMap, node: u32, surfel: u32, p: &Vector3
     if sw <= 1e-6 {
         return matched();
     }
-    let mean = mean / sw;
-    let jacobian = cells[..n].iter().map(|(_, mu, grad)| (mu - mean) * grad.transpose()).sum::<Matrix3<f64>>() / sw;
-    let [xx, xy, xz, yy, yz, zz] = cov.map(|c| c / sw);
+    let inv_sw = 1.0 / sw;
+    let mean = mean * inv_sw;
+    let jacobian = (mean_grad - mean * grad_sum.transpose()) * inv_sw;
+    let [xx, xy, xz, yy, yz, zz] = cov.map(|c| c * inv_sw);
     Interpolated { mean, cov: Matrix3::new(xx, xy, xz, xy, yy, yz, xz, yz, zz), jacobian }
 }
 
