@@ -171,6 +171,12 @@ fn gen_mul(k: usize, m: &Matrix3<f64>) -> Matrix3<f64> {
     out
 }
 
+/// `tr(A B) = Σᵢⱼ Aᵢⱼ Bⱼᵢ`, without forming the product.
+#[inline]
+fn trace_of_product(a: &Matrix3<f64>, b: &Matrix3<f64>) -> f64 {
+    a.component_mul(&b.transpose()).sum()
+}
+
 /// `G_k v`.
 #[inline]
 fn gen_vec(k: usize, v: &Vector3<f64>) -> Vector3<f64> {
@@ -227,10 +233,10 @@ pub(crate) fn likelihood_term(t: &TermInput) -> Option<(f64, Vector6<f64>, Matri
                 let gcg_lk = -gen_mul(k, &gc[l].transpose()).transpose();
                 let ds_kl = 0.5 * (qc + qc.transpose()) - gcg_kl - gcg_lk;
                 let dp_kl = t.a * half_qp;
-                v += 2.0 * s_dp[j].dot(&ds_u[k]) + (s * ds_kl).trace()
+                v += 2.0 * s_dp[j].dot(&ds_u[k]) + trace_of_product(&s, &ds_kl)
                     - 2.0 * dp_kl.dot(&u)
                     - u.dot(&(ds_kl * u))
-                    - (s_ds[l] * s_ds[k]).trace()
+                    - trace_of_product(&s_ds[l], &s_ds[k])
                     + 2.0 * ds_u[l].dot(&s_ds_u[k]);
             }
             hess[(i, j)] = v;
