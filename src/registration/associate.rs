@@ -395,10 +395,13 @@ impl Search<'_> {
         let j0 = [0, 1, 2].map(|i| (k0[i] - lo[i]) as usize);
         let seed = seed.filter(|(_, k)| (0..3).all(|i| k[i] >= lo[i] && k[i] <= hi[i]));
         let js = seed.map(|(_, k)| [0, 1, 2].map(|i| (k[i] - lo[i]) as usize));
+        // Cells already visited, by their index in the 5×5×5 cube.
+        let flat = |j: [usize; 3]| (j[0] * 5 + j[1]) * 5 + j[2];
+        let (visited_centre, visited_seed) = (flat(j0), js.map_or(usize::MAX, flat));
         if let Some((m, k)) = seed {
             self.visit(m, k);
         }
-        if js != Some(j0)
+        if visited_seed != visited_centre
             && let Some(m) = cells.get(j0)
         {
             self.visit(m, k0);
@@ -433,8 +436,9 @@ impl Search<'_> {
                         self.second = self.second.min(d);
                         continue;
                     }
-                    if [a, b, c] != j0
-                        && Some([a, b, c]) != js
+                    let here = flat([a, b, c]);
+                    if here != visited_centre
+                        && here != visited_seed
                         && let Some(m) = cells.get([a, b, c])
                     {
                         self.visit(m, [lo[0] + a as i32, lo[1] + b as i32, lo[2] + c as i32]);
