@@ -125,21 +125,26 @@ pub(crate) fn interpolate(model: &SurfelMap, node: u32, surfel: u32, p: &Vector3
         return matched();
     }
     let step = off.map(|o| if o >= 0.0 { 1 } else { -1 });
+    // Per axis, the weight factor of the cell at offset 0 and of the one at `step`
+    // (1 − |o| and |o|), and their derivatives along the axis (∓ sign(o) / res).
+    let factors = |o: f64, s: i32| {
+        let (a, ds) = (o.abs(), s as f64 * inv_res);
+        ([1.0 - a, a], [-ds, ds])
+    };
+    let ((wx, gx), (wy, gy), (wz, gz)) = (factors(off.x, step.x), factors(off.y, step.y), factors(off.z, step.z));
     let row = model.surfel_neighbors(surfel);
     // The covariance is symmetric: its six distinct entries are blended (packed as
     // `Surfel::cov_packed`), the same sums as the full matrix's.
     let (mut sw, mut mean, mut cov) = (0.0, Vector3::zeros(), [0.0f64; 6]);
     let (mut mean_grad, mut grad_sum) = (Matrix3::zeros(), Vector3::zeros());
-    for dx in [0, step.x] {
-        for dy in [0, step.y] {
-            for dz in [0, step.z] {
+    for (i, dx) in [0, step.x].into_iter().enumerate() {
+        for (j, dy) in [0, step.y].into_iter().enumerate() {
+            for (k, dz) in [0, step.z].into_iter().enumerate() {
                 let s = row[neighbor_index(dx, dy, dz)];
                 if s == NONE || !surfels[s as usize].usable() {
                     continue;
                 }
-                let r = off - Vector3::new(dx as f64, dy as f64, dz as f64);
-                let f = r.map(|v| 1.0 - v.abs());
-                let w = f.x * f.y * f.z;
+                let w = wx[i] * wy[j] * wz[k];
                 if w > 0.0 {
                     let sf = &surfels[s as usize];
                     let mu = sf.mean.cast::<f64>();
@@ -148,10 +153,7 @@ pub(crate) fn interpolate(model: &SurfelMap, node: u32, surfel: u32, p: &Vector3
                     for (c, &v) in cov.iter_mut().zip(&sf.cov_packed) {
                         *c += v as f64 * w;
                     }
-                    // ∂w/∂p: each factor 1 − |r| falls by sign(r)/res along its axis.
-                    let grad =
-                        Vector3::new(-r.x.signum() * f.y * f.z, -r.y.signum() * f.x * f.z, -r.z.signum() * f.x * f.y)
-                            * inv_res;
+                    let grad = Vector3::new(gx[i] * wy[j] * wz[k], wx[i] * gy[j] * wz[k], wx[i] * wy[j] * gz[k]);
                     mean_grad += mu * grad.transpose();
                     grad_sum += grad;
                 }
