@@ -186,7 +186,12 @@ fn gen_vec(k: usize, v: &Vector3<f64>) -> Vector3<f64> {
 /// Newton stage: `(e, ∇e, ∇²e)` of `e = log det Σ + dᵀΣ⁻¹d` (Eq. 4).
 ///
 /// Uses the structure of the rotation generators: `G_k C` permutes rows, `C G_k =
-/// −(G_k C)ᵀ` for symmetric `C`, and `G_k G_l = e_l e_kᵀ − δ_kl I`.
+/// −(G_k C)ᵀ` for symmetric `C`, and `G_k G_l = e_l e_kᵀ − δ_kl I`. The second
+/// derivatives `Σ_kl` of the covariance enter only through `tr(SΣ_kl)` and `uᵀΣ_kl u`,
+/// which are formed without `Σ_kl`: with `M = CS`, `Q = G_kG_l + G_lG_k`,
+/// `tr(S·½(QC + CQ)) = tr(QM) = M_kl + M_lk − 2δ_kl tr M`,
+/// `tr(S G_k C G_l) = tr((G_l C)(G_k S))`, `uᵀ·½(QC + CQ)·u = (Qu)ᵀCu` and
+/// `uᵀG_kCG_l u = −(G_k u)ᵀC(G_l u)`.
 pub(crate) fn likelihood_term(t: &TermInput) -> Option<(f64, Vector6<f64>, Matrix6<f64>)> {
     let (log_det, s, d) = likelihood_parts(t)?;
     let u = s * d;
@@ -201,6 +206,16 @@ pub(crate) fn likelihood_term(t: &TermInput) -> Option<(f64, Vector6<f64>, Matri
     let ds_u: [Vector3<f64>; 3] = std::array::from_fn(|k| ds[k] * u);
     let s_dp: [Vector3<f64>; 6] = std::array::from_fn(|i| s * dp[i]);
     let s_ds_u: [Vector3<f64>; 3] = std::array::from_fn(|k| s * ds_u[k]);
+    // What the second derivatives of Σ and p need (see above).
+    let gs: [Matrix3<f64>; 3] = std::array::from_fn(|k| gen_mul(k, &s));
+    let m = t.c * s;
+    let tr_m = m.trace();
+    let cu = t.c * u;
+    let u_cu = u.dot(&cu);
+    let gu: [Vector3<f64>; 3] = std::array::from_fn(|k| gen_vec(k, &u));
+    let c_gu: [Vector3<f64>; 3] = std::array::from_fn(|k| t.c * gu[k]);
+    let au = t.a.transpose() * u;
+    let p_au = t.p.dot(&au);
     let mut grad = Vector6::zeros();
     for i in 0..6 {
         grad[i] = -2.0 * dp[i].dot(&u);
@@ -217,25 +232,17 @@ pub(crate) fn likelihood_term(t: &TermInput) -> Option<(f64, Vector6<f64>, Matri
             }
             if i >= 3 {
                 let (k, l) = (i - 3, j - 3);
-                // Q = G_kG_l + G_lG_k = e_l e_kᵀ + e_k e_lᵀ − 2δ_kl I.
-                // ½ Q p and ½(QC + CQ), then Σ_kl = ½(QC + CQ) − G_kCG_l − G_lCG_k.
                 let delta = if k == l { 1.0 } else { 0.0 };
-                let mut half_qp = -delta * t.p;
-                half_qp[l] += 0.5 * t.p[k];
-                half_qp[k] += 0.5 * t.p[l];
-                let mut qc = -2.0 * delta * t.c;
-                for col in 0..3 {
-                    qc[(l, col)] += t.c[(k, col)];
-                    qc[(k, col)] += t.c[(l, col)];
-                }
-                // G_k C G_l = (G_k C) G_l = −(G_l (G_k C)ᵀ)ᵀ.
-                let gcg_kl = -gen_mul(l, &gc[k].transpose()).transpose();
-                let gcg_lk = -gen_mul(k, &gc[l].transpose()).transpose();
-                let ds_kl = 0.5 * (qc + qc.transpose()) - gcg_kl - gcg_lk;
-                let dp_kl = t.a * half_qp;
-                v += 2.0 * s_dp[j].dot(&ds_u[k]) + trace_of_product(&s, &ds_kl)
-                    - 2.0 * dp_kl.dot(&u)
-                    - u.dot(&(ds_kl * u))
+                // tr(SΣ_kl), uᵀΣ_kl u and (A·½Qp)ᵀu.
+                let tr_s_ds_kl = m[(k, l)] + m[(l, k)]
+                    - 2.0 * delta * tr_m
+                    - trace_of_product(&gc[l], &gs[k])
+                    - trace_of_product(&gc[k], &gs[l]);
+                let u_ds_kl_u = u[k] * cu[l] + u[l] * cu[k] - 2.0 * delta * u_cu + 2.0 * gu[k].dot(&c_gu[l]);
+                let dp_kl_u = -delta * p_au + 0.5 * (t.p[k] * au[l] + t.p[l] * au[k]);
+                v += 2.0 * s_dp[j].dot(&ds_u[k]) + tr_s_ds_kl
+                    - 2.0 * dp_kl_u
+                    - u_ds_kl_u
                     - trace_of_product(&s_ds[l], &s_ds[k])
                     + 2.0 * ds_u[l].dot(&s_ds_u[k]);
             }
