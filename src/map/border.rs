@@ -65,11 +65,13 @@ impl BorderScratch {
 /// otherwise.
 #[inline(always)]
 fn mark_jump(flags: &mut [u8], (prev, prev_r2): (usize, f32), (here, r2): (usize, f32), jump2: f32, foreground: u8) {
-    let ratio = prev_r2 / r2;
-    if ratio < jump2 {
+    // The ratio `prev_r2 / r2` against `jump2` and `1 / jump2`, without dividing (both
+    // squared ranges are positive): a division per pixel and direction would cost more
+    // than the rest of the scan.
+    if prev_r2 < jump2 * r2 {
         flags[here] |= VIRTUAL_BORDER;
         flags[prev] |= foreground;
-    } else if ratio * jump2 > 1.0 {
+    } else if prev_r2 * jump2 > r2 {
         flags[prev] |= VIRTUAL_BORDER;
         flags[here] |= foreground;
     }

@@ -40,11 +40,11 @@ fn bin_shape(c: f32, w: f32, out: &mut [f32]) {
     out[2] += w * c.max(0.0);
 }
 
-/// Soft-bins a colour difference into (negative, zero, positive), saturating at `theta`
-/// (without branches, as [`bin_shape`]).
+/// Soft-bins a colour difference into (negative, zero, positive), saturating at
+/// `1 / inv_theta` (without branches, as [`bin_shape`]).
 #[inline]
-fn bin_texture(d: f32, theta: f32, w: f32, out: &mut [f32]) {
-    let a = (d.abs() / theta).min(1.0);
+fn bin_texture(d: f32, inv_theta: f32, w: f32, out: &mut [f32]) {
+    let a = (d.abs() * inv_theta).min(1.0);
     let negative = if d < 0.0 { a } else { 0.0 };
     out[0] += w * negative;
     out[1] += w * (1.0 - a);
@@ -55,20 +55,20 @@ fn add_pair(
     me: (&Surfel, &Vector3<f32>),
     other: (&Surfel, &Vector3<f32>),
     weight: f32,
-    theta: f32,
+    inv_theta: f32,
     h: &mut Descriptor,
 ) {
     let ((me, n_me), (other, n_other)) = (me, other);
     let diff: Vector3<f32> = other.mean - me.mean;
     let len = diff.norm();
-    let d = if len > 0.0 { diff / len } else { Vector3::zeros() };
+    let d = if len > 0.0 { diff * (1.0 / len) } else { Vector3::zeros() };
     bin_shape(n_me.dot(&d), weight, &mut h[0..3]);
     bin_shape(n_other.dot(&d), weight, &mut h[3..6]);
     bin_shape(n_me.dot(n_other), weight, &mut h[6..9]);
     let dc = other.color - me.color;
-    bin_texture(dc.x, theta, weight, &mut h[9..12]);
-    bin_texture(dc.y, theta, weight, &mut h[12..15]);
-    bin_texture(dc.z, theta, weight, &mut h[15..18]);
+    bin_texture(dc.x, inv_theta, weight, &mut h[9..12]);
+    bin_texture(dc.y, inv_theta, weight, &mut h[12..15]);
+    bin_texture(dc.z, inv_theta, weight, &mut h[15..18]);
 }
 
 fn normalize_rows(h: &mut Descriptor) {
@@ -94,7 +94,7 @@ fn neighbor_surfels<'a>(surfels: &'a [Surfel], row: &'a [u32; 27]) -> impl Itera
 
 /// Computes the descriptors of all valid surfels; `simple` is scratch of the same length.
 pub(crate) fn compute_descriptors(map: &mut SurfelMap, simple: &mut [Descriptor]) {
-    let theta = map.params.texture_bin_threshold;
+    let inv_theta = 1.0 / map.params.texture_bin_threshold;
     let weight = map.params.descriptor_neighbor_weight;
     let rows = &map.surfel_neighbors;
     let surfels = &map.surfels;
@@ -108,9 +108,9 @@ pub(crate) fn compute_descriptors(map: &mut SurfelMap, simple: &mut [Descriptor]
                 continue;
             }
             let mine = (me, &normals[idx]);
-            add_pair(mine, mine, me.count, theta, h);
+            add_pair(mine, mine, me.count, inv_theta, h);
             for (s, other) in neighbor_surfels(surfels, &rows[idx]) {
-                add_pair(mine, (other, &normals[s as usize]), other.count, theta, h);
+                add_pair(mine, (other, &normals[s as usize]), other.count, inv_theta, h);
             }
             normalize_rows(h);
         }
@@ -144,10 +144,10 @@ mod tests {
         bin_shape(0.25, 2.0, &mut h);
         assert_eq!(h, [0.0, 1.5, 0.5]);
         let mut t = [0.0f32; 3];
-        bin_texture(-0.05, 0.1, 1.0, &mut t);
+        bin_texture(-0.05, 10.0, 1.0, &mut t);
         assert!((t[0] - 0.5).abs() < 1e-6 && (t[1] - 0.5).abs() < 1e-6 && t[2] == 0.0);
         let mut t = [0.0f32; 3];
-        bin_texture(0.3, 0.1, 1.0, &mut t);
+        bin_texture(0.3, 10.0, 1.0, &mut t);
         assert_eq!(t, [0.0, 0.0, 1.0]);
     }
 
