@@ -45,11 +45,12 @@ impl RawMoments {
         }
         let s = Vector3::new(stats.sum[0], stats.sum[1], stats.sum[2]);
         let n = stats.count;
+        let m = s * (1.0 / n);
         let mut raw2 = [0.0; 6];
         let mut k = 0;
         for i in 0..3 {
             for j in i..3 {
-                raw2[k] = stats.scatter[packed_index(i, j)] + s[i] * s[j] / n;
+                raw2[k] = stats.scatter[packed_index(i, j)] + s[i] * m[j];
                 k += 1;
             }
         }
@@ -66,9 +67,10 @@ impl RawMoments {
 
     fn covariance(&self) -> Matrix3<f64> {
         let n = self.n;
-        let m = self.sum / n;
+        let m = self.sum * (1.0 / n);
         let r = &self.raw2;
-        let c = |v: f64, i: usize, j: usize| (v - n * m[i] * m[j]) / (n - 1.0);
+        let inv_dof = 1.0 / (n - 1.0);
+        let c = |v: f64, i: usize, j: usize| (v - n * m[i] * m[j]) * inv_dof;
         let (xx, xy, xz) = (c(r[0], 0, 0), c(r[1], 0, 1), c(r[2], 0, 2));
         let (yy, yz, zz) = (c(r[3], 1, 1), c(r[4], 1, 2), c(r[5], 2, 2));
         Matrix3::new(xx, xy, xz, xy, yy, yz, xz, yz, zz)

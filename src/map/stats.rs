@@ -91,11 +91,13 @@ impl SurfelStats {
         if count <= 0.0 {
             return SurfelStats::EMPTY;
         }
+        let inv_count = 1.0 / count;
+        let mean_rel = sum_rel.map(|v| v * inv_count);
         let mut scatter = [0.0; PACKED6];
         let mut idx = 0;
         for i in 0..6 {
             for j in i..6 {
-                scatter[idx] = raw2_rel[idx] - sum_rel[i] * sum_rel[j] / count;
+                scatter[idx] = raw2_rel[idx] - sum_rel[i] * mean_rel[j];
                 idx += 1;
             }
         }
