@@ -92,6 +92,14 @@ impl Surfel {
     }
 }
 
+/// `⌊x⌋ as i32` (saturating; NaN gives 0) without a call: the x86-64 baseline has no
+/// rounding instruction, and `f64::floor` there is a software routine.
+#[inline(always)]
+fn floor_to_i32(x: f64) -> i32 {
+    let t = x as i32;
+    if (t as f64) > x { t.saturating_sub(1) } else { t }
+}
+
 /// A multi-resolution surfel map in fixed-capacity storage.
 #[derive(Debug, Clone)]
 pub struct SurfelMap {
@@ -207,7 +215,7 @@ impl SurfelMap {
     /// The integer key of the cell containing `p` at `level`.
     pub fn key_of(&self, p: &Vector3<f64>, level: usize) -> [i32; 3] {
         let inv = 1.0 / self.resolution(level);
-        [(p.x * inv).floor() as i32, (p.y * inv).floor() as i32, (p.z * inv).floor() as i32]
+        [floor_to_i32(p.x * inv), floor_to_i32(p.y * inv), floor_to_i32(p.z * inv)]
     }
 
     /// The node of `key` at `level`, if any.
@@ -259,5 +267,18 @@ mod tests {
     fn surfel_is_one_cache_line() {
         assert_eq!(std::mem::size_of::<Surfel>(), 64);
         assert_eq!(std::mem::align_of::<Surfel>(), 64);
+    }
+
+    #[test]
+    fn floor_to_i32_is_floor_then_saturating_cast() {
+        let edge = [0.0, -0.0, 0.5, -0.5, 1.0, -1.0, 2.999_999, -2.000_001, 1e300, -1e300, f64::NAN];
+        let limits = [i32::MAX as f64, i32::MIN as f64, i32::MIN as f64 - 0.5, f64::INFINITY, f64::NEG_INFINITY];
+        for x in edge.into_iter().chain(limits) {
+            assert_eq!(floor_to_i32(x), x.floor() as i32, "{x}");
+        }
+        for k in -2000..2000 {
+            let x = k as f64 * 0.012_5 + 1e-9 * (k % 7) as f64;
+            assert_eq!(floor_to_i32(x), x.floor() as i32, "{x}");
+        }
     }
 }
