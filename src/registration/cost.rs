@@ -41,7 +41,7 @@ pub(crate) struct TermInput {
 /// The inverse and the determinant of a symmetric 3×3 matrix (its upper triangle is
 /// read), by cofactors; `None` if the determinant is zero.
 #[inline]
-fn symmetric_inverse(m: &Matrix3<f64>) -> Option<(Matrix3<f64>, f64)> {
+pub(crate) fn symmetric_inverse(m: &Matrix3<f64>) -> Option<(Matrix3<f64>, f64)> {
     let (a, b, c, d, e, f) = (m[(0, 0)], m[(0, 1)], m[(0, 2)], m[(1, 1)], m[(1, 2)], m[(2, 2)]);
     let (c00, c01, c02) = (d * f - e * e, c * e - b * f, b * e - c * d);
     let det = a * c00 + b * c01 + c * c02;

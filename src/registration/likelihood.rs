@@ -9,6 +9,7 @@
 //! match of a surfel with itself scores about `½(χ²_floor − 3)`; an unrelated map ≈ 0.
 
 use super::associate::DirCandidates;
+use super::cost::{rotate_symmetric, symmetric_inverse};
 use crate::geometry::Pose;
 use crate::map::{NONE, SurfelMap};
 use nalgebra::{Matrix3, Vector3};
@@ -76,7 +77,7 @@ impl MatchScratch {
                     let res = b.resolution(level);
                     let reg = Matrix3::identity() * (regularization * res * res);
                     let p = r * s.mean.cast::<f64>() + t;
-                    let c = r * s.cov() * r.transpose() + reg;
+                    let c = rotate_symmetric(&r, &s.cov()) + reg;
                     let normal = rf * n;
                     let best = best_match(b, level, &p, &c, &normal, near.of(s.dir), &reg);
                     if best < CHI2_FLOOR {
@@ -139,7 +140,7 @@ fn best_match(
                 continue;
             }
             let sigma = c + other.cov() + reg;
-            let Some(inv) = sigma.try_inverse() else { continue };
+            let Some((inv, _)) = symmetric_inverse(&sigma) else { continue };
             best = best.min(d.dot(&(inv * d)));
         }
     }
