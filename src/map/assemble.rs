@@ -158,6 +158,9 @@ impl Assembly {
 
 /// Creates one surfel per node and used view direction, in node order (so surfels
 /// are level-contiguous too). Returns the number that did not fit.
+///
+/// The per-surfel arrays that start out constant (statistics, normals, view
+/// directions: 250 bytes per surfel) are filled in parallel, within their capacity.
 fn assign_surfels(map: &mut SurfelMap) -> usize {
     let mut dropped = 0;
     let capacity = map.surfel_capacity();
@@ -172,11 +175,12 @@ fn assign_surfels(map: &mut SurfelMap) -> usize {
             }
             node.surfels[dir] = map.surfels.len() as u32;
             map.surfels.push(Surfel { node: i as u32, dir: dir as u8, level: node.level, ..Surfel::EMPTY });
-            map.normals.push(nalgebra::Vector3::zeros());
-            map.stats.push(SurfelStats::EMPTY);
-            map.view_dirs.push([0.0; 3]);
         }
     }
+    let n = map.surfels.len();
+    map.stats.par_extend(rayon::iter::repeat_n(SurfelStats::EMPTY, n));
+    map.normals.par_extend(rayon::iter::repeat_n(nalgebra::Vector3::zeros(), n));
+    map.view_dirs.par_extend(rayon::iter::repeat_n([0.0; 3], n));
     dropped
 }
 
