@@ -49,15 +49,17 @@ impl Assembly {
         map.tree.establish_neighbors();
         surfel_neighborhoods(map);
         // §3.1 evaluation, normals; §3.2 descriptors.
+        // Per-surfel scratch and descriptors are sized here (filled in parallel: they are
+        // written through before they are read).
         let n = map.surfels.len();
         self.raw.clear();
-        self.raw.resize(n, RawMoments::default());
+        self.raw.par_extend(rayon::iter::repeat_n(RawMoments::default(), n));
         evaluate_statistics(map, &mut self.raw);
         estimate_normals(map, &self.raw);
         self.simple.clear();
-        self.simple.resize(n, [0.0; DESCRIPTOR_LEN]);
+        self.simple.par_extend(rayon::iter::repeat_n([0.0; DESCRIPTOR_LEN], n));
         map.descriptors.clear();
-        map.descriptors.resize(n, [0.0; DESCRIPTOR_LEN]);
+        map.descriptors.par_extend(rayon::iter::repeat_n([0.0; DESCRIPTOR_LEN], n));
         compute_descriptors(map, &mut self.simple);
         Dropped { aggregates, surfels }
     }
