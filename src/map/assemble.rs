@@ -76,7 +76,7 @@ impl Assembly {
                 self.order.push((morton_code(fine), b as u32, i as u32));
             }
         }
-        self.order.sort_unstable();
+        self.order.par_sort_unstable();
     }
 
     fn aggregates<'a>(&'a self, bands: &'a [Band]) -> impl Iterator<Item = &'a Aggregate> + 'a {
