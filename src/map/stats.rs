@@ -95,9 +95,9 @@ impl SurfelStats {
         let mean_rel = sum_rel.map(|v| v * inv_count);
         let mut scatter = [0.0; PACKED6];
         let mut idx = 0;
-        for i in 0..6 {
-            for j in i..6 {
-                scatter[idx] = raw2_rel[idx] - sum_rel[i] * mean_rel[j];
+        for (i, &si) in sum_rel.iter().enumerate() {
+            for &mj in &mean_rel[i..] {
+                scatter[idx] = raw2_rel[idx] - si * mj;
                 idx += 1;
             }
         }
