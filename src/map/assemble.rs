@@ -52,14 +52,11 @@ impl Assembly {
         // Per-surfel scratch and descriptors are sized here (filled in parallel: they are
         // written through before they are read).
         let n = map.surfels.len();
-        self.raw.clear();
-        self.raw.par_extend(rayon::iter::repeat_n(RawMoments::default(), n));
+        refill(&mut self.raw, RawMoments::default(), n);
         evaluate_statistics(map, &mut self.raw);
         estimate_normals(map, &self.raw);
-        self.simple.clear();
-        self.simple.par_extend(rayon::iter::repeat_n([0.0; DESCRIPTOR_LEN], n));
-        map.descriptors.clear();
-        map.descriptors.par_extend(rayon::iter::repeat_n([0.0; DESCRIPTOR_LEN], n));
+        refill(&mut self.simple, [0.0; DESCRIPTOR_LEN], n);
+        refill(&mut map.descriptors, [0.0; DESCRIPTOR_LEN], n);
         compute_descriptors(map, &mut self.simple);
         Dropped { aggregates, surfels }
     }
@@ -180,10 +177,17 @@ fn assign_surfels(map: &mut SurfelMap) -> usize {
         }
     }
     let n = map.surfels.len();
-    map.stats.par_extend(rayon::iter::repeat_n(SurfelStats::EMPTY, n));
-    map.normals.par_extend(rayon::iter::repeat_n(nalgebra::Vector3::zeros(), n));
-    map.view_dirs.par_extend(rayon::iter::repeat_n([0.0; 3], n));
+    refill(&mut map.stats, SurfelStats::EMPTY, n);
+    refill(&mut map.normals, nalgebra::Vector3::zeros(), n);
+    refill(&mut map.view_dirs, [0.0; 3], n);
     dropped
+}
+
+/// Makes `v` hold `n` copies of `value`, written in parallel (no allocation within the
+/// capacity): per-surfel arrays of a VGA map hold megabytes.
+fn refill<T: Clone + Send + Sync>(v: &mut Vec<T>, value: T, n: usize) {
+    v.clear();
+    v.par_extend(rayon::iter::repeat_n(value, n));
 }
 
 /// Sums children into parents, level by level from the finest (so every inner node

@@ -38,6 +38,12 @@ pub(crate) struct TermInput {
     pub a: Matrix3<f64>,
 }
 
+/// The symmetric 3×3 matrix with upper triangle `xx, xy, xz, yy, yz, zz`.
+#[inline]
+pub(crate) fn symmetric(xx: f64, xy: f64, xz: f64, yy: f64, yz: f64, zz: f64) -> Matrix3<f64> {
+    Matrix3::new(xx, xy, xz, xy, yy, yz, xz, yz, zz)
+}
+
 /// The inverse and the determinant of a symmetric 3×3 matrix (its upper triangle is
 /// read), by cofactors; `None` if the determinant is zero.
 #[inline]
@@ -51,7 +57,7 @@ pub(crate) fn symmetric_inverse(m: &Matrix3<f64>) -> Option<(Matrix3<f64>, f64)>
     let inv = 1.0 / det;
     let (i00, i01, i02) = (c00 * inv, c01 * inv, c02 * inv);
     let (i11, i12, i22) = ((a * f - c * c) * inv, (b * c - a * e) * inv, (a * d - b * b) * inv);
-    Some((Matrix3::new(i00, i01, i02, i01, i11, i12, i02, i12, i22), det))
+    Some((symmetric(i00, i01, i02, i11, i12, i22), det))
 }
 
 /// `R C Rᵀ` for a symmetric `C` (the upper triangle computed, mirrored).
@@ -59,8 +65,7 @@ pub(crate) fn symmetric_inverse(m: &Matrix3<f64>) -> Option<(Matrix3<f64>, f64)>
 pub(crate) fn rotate_symmetric(r: &Matrix3<f64>, c: &Matrix3<f64>) -> Matrix3<f64> {
     let rc = r * c;
     let entry = |i: usize, j: usize| rc[(i, 0)] * r[(j, 0)] + rc[(i, 1)] * r[(j, 1)] + rc[(i, 2)] * r[(j, 2)];
-    let (xx, xy, xz, yy, yz, zz) = (entry(0, 0), entry(0, 1), entry(0, 2), entry(1, 1), entry(1, 2), entry(2, 2));
-    Matrix3::new(xx, xy, xz, xy, yy, yz, xz, yz, zz)
+    symmetric(entry(0, 0), entry(0, 1), entry(0, 2), entry(1, 1), entry(1, 2), entry(2, 2))
 }
 
 /// `e = dᵀΣ⁻¹d`; `None` if `Σ` is singular.
@@ -116,46 +121,19 @@ pub(crate) fn lm_term(t: &TermInput) -> Option<(f64, Vector6<f64>, Matrix6<f64>)
         1 => px * b[(2, j)] - pz * b[(0, j)],
         _ => py * b[(0, j)] - px * b[(1, j)],
     };
-    let (r00, r01, r02, r11, r12, r22) = (rr(0, 0), rr(0, 1), rr(0, 2), rr(1, 1), rr(1, 2), rr(2, 2));
     let g = Vector6::new(-au.x, -au.y, -au.z, au.y * pz - au.z * py, au.z * px - au.x * pz, au.x * py - au.y * px);
-    let h = Matrix6::new(
+    let mut h = Matrix6::zeros();
+    h.fixed_view_mut::<3, 3>(0, 0).copy_from(&symmetric(
         sa[(0, 0)],
         sa[(0, 1)],
         sa[(0, 2)],
-        -b[(0, 0)],
-        -b[(0, 1)],
-        -b[(0, 2)],
-        sa[(0, 1)],
         sa[(1, 1)],
         sa[(1, 2)],
-        -b[(1, 0)],
-        -b[(1, 1)],
-        -b[(1, 2)],
-        sa[(0, 2)],
-        sa[(1, 2)],
         sa[(2, 2)],
-        -b[(2, 0)],
-        -b[(2, 1)],
-        -b[(2, 2)],
-        -b[(0, 0)],
-        -b[(1, 0)],
-        -b[(2, 0)],
-        r00,
-        r01,
-        r02,
-        -b[(0, 1)],
-        -b[(1, 1)],
-        -b[(2, 1)],
-        r01,
-        r11,
-        r12,
-        -b[(0, 2)],
-        -b[(1, 2)],
-        -b[(2, 2)],
-        r02,
-        r12,
-        r22,
-    );
+    ));
+    h.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-b));
+    h.fixed_view_mut::<3, 3>(3, 0).copy_from(&(-b.transpose()));
+    h.fixed_view_mut::<3, 3>(3, 3).copy_from(&symmetric(rr(0, 0), rr(0, 1), rr(0, 2), rr(1, 1), rr(1, 2), rr(2, 2)));
     Some((e, g, h))
 }
 

@@ -4,7 +4,7 @@
 //! slot, and the slots are added in index order: the result is bit-identical for any
 //! number of threads.
 
-use super::cost::{TermInput, likelihood_cost, likelihood_term, lm_term, mahalanobis, rotate_symmetric};
+use super::cost::{TermInput, likelihood_cost, likelihood_term, lm_term, mahalanobis, rotate_symmetric, symmetric};
 use super::params::RegistrationParams;
 use super::workspace::{Association, NODE_CHUNK, Partial};
 use crate::geometry::Pose;
@@ -167,7 +167,7 @@ pub(crate) fn interpolate(model: &SurfelMap, node: u32, surfel: u32, p: &Vector3
     let mean = mean * inv_sw;
     let jacobian = (mean_grad - mean * grad_sum.transpose()) * inv_sw;
     let [xx, xy, xz, yy, yz, zz] = cov.map(|c| c * inv_sw);
-    Interpolated { mean, cov: Matrix3::new(xx, xy, xz, xy, yy, yz, xz, yz, zz), jacobian }
+    Interpolated { mean, cov: symmetric(xx, xy, xz, yy, yz, zz), jacobian }
 }
 
 /// The slot of every (level, chunk) pair: levels from `finest` to `coarsest`, chunks of
