@@ -262,13 +262,15 @@ pub struct TrackingTimes {
 
 /// Times the tracker's per-frame step (scene map + registration + quality, per object)
 /// on `frames` frames of a dataset from `first_frame`, every object started at its
-/// ground-truth pose; frames are decoded beforehand. Returns the times (ms) of object
-/// 0 per frame, over `passes` passes, the start-up frame apart.
+/// ground-truth pose; frames are decoded beforehand. With a `gap`, the thread sleeps
+/// that long before each frame (a live tracker idles between camera frames). Returns
+/// the times (ms) of object 0 per frame, over `passes` passes, the start-up frame apart.
 pub fn tracking_ms(
     config: &crate::io::tracker_config::TrackerConfig,
     job: &BenchJob,
     first_frame: usize,
     half: bool,
+    gap: std::time::Duration,
 ) -> Result<TrackingTimes> {
     use super::tracking::{StepOutput, load_tracker, track_frame};
     let camera = read_camera(&job.camera)?;
@@ -304,6 +306,9 @@ pub fn tracking_ms(
         }
         for d in &decoded {
             let frame = RgbdFrame::new(d.stamp_ns, cam, &d.rgb, &d.depth)?;
+            if !gap.is_zero() {
+                std::thread::sleep(gap);
+            }
             track_frame(&mut tracker, &pool, &frame, &mut out);
             ms.push(f64::from(out.build_ms[0] + out.register_ms[0]));
         }

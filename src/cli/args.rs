@@ -286,6 +286,12 @@ pub struct BenchArgs {
     /// First frame of the tracking benchmark (the teddy model was learned from 0–99).
     #[arg(long, default_value_t = 100)]
     pub tracking_first_frame: usize,
+    /// Idle this many milliseconds before each tracking frame, as a live tracker idles
+    /// between camera frames (33 at 30 Hz). 0 runs the frames back to back. Where idle
+    /// cores wake slowly (a virtual machine, deep power-saving states) the step is slower
+    /// after a gap than back to back; docs/benchmarks.md shows both.
+    #[arg(long, default_value_t = 0.0)]
+    pub frame_gap_ms: f64,
     /// Resolution factor λ of the maps (see `odometry --help`).
     #[arg(long, default_value_t = 0.01)]
     pub lambda: f64,

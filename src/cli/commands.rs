@@ -244,6 +244,11 @@ pub fn bench(a: BenchArgs) -> Result<()> {
         graph_key_views: a.graph_key_views,
         params: odometry_params(a.lambda),
     };
+    anyhow::ensure!(
+        a.frame_gap_ms.is_finite() && (0.0..=10_000.0).contains(&a.frame_gap_ms),
+        "--frame-gap-ms must be between 0 and 10000 ms, not {}",
+        a.frame_gap_ms
+    );
     let threads = a.threads.unwrap_or_else(rayon::current_num_threads);
     let capacity_before = app::capacity::parallel_capacity(threads);
     println!("compiled for: {}\n", app::bench::instruction_set());
@@ -251,14 +256,17 @@ pub fn bench(a: BenchArgs) -> Result<()> {
     app::bench::print(&results, threads);
     if let Some(path) = &a.tracking_config {
         let config = mrsmap::io::tracker_config::read_tracker_config(path)?;
+        let gap = std::time::Duration::from_secs_f64(a.frame_gap_ms * 1e-3);
+        let gap_note =
+            if gap.is_zero() { String::new() } else { format!(", {} ms idle before each frame", a.frame_gap_ms) };
         println!(
-            "\n| tracking (object '{}') | threads | frames | per frame median / p99 (ms) | first frame (ms) |",
+            "\n| tracking (object '{}'{gap_note}) | threads | frames | per frame median / p99 (ms) | first frame (ms) |",
             config.objects[0].name
         );
         println!("|---|---|---|---|---|");
         for &res in &job.resolutions {
             let half = res == app::bench::Resolution::Qvga;
-            let t = app::bench::tracking_ms(&config, &job, a.tracking_first_frame, half)?;
+            let t = app::bench::tracking_ms(&config, &job, a.tracking_first_frame, half, gap)?;
             let ms = &t.steady_ms;
             println!(
                 "| {} | {threads} | {} | {:.2} / {:.2} | {:.2} |",

@@ -124,7 +124,7 @@ pub(crate) fn associate(
     }
     let mut total = Partial::ZERO;
     partials[..offsets[MAX_LEVELS]].iter().for_each(|s| total.add(s));
-    total
+    total.mirrored()
 }
 
 /// The association records of the finer levels (the children of the level in work).
@@ -203,13 +203,7 @@ fn associate_node(
         search.cube(&c, radius, level, seed);
     } else {
         let key = model.nodes()[previous.model_node as usize].key;
-        let neighbors = model.neighbors(previous.model_node);
-        search.visit(neighbors[SELF_NEIGHBOR], key);
-        for ((k, &m), d) in neighbors.iter().enumerate().zip(&NEIGHBOR_OFFSETS) {
-            if k != SELF_NEIGHBOR && m != NONE {
-                search.visit(m, [key[0] + d[0], key[1] + d[1], key[2] + d[2]]);
-            }
-        }
+        search.neighbourhood(key, model.neighbors(previous.model_node));
     }
     let mut result = search.found;
     result.pass = pass as u16;
@@ -310,6 +304,20 @@ impl Search<'_> {
             self.second = self.second.min(near);
             return;
         }
+        self.test(m);
+    }
+
+    /// [`Search::visit`] of a cell whose slab bound (see [`Search::slabs`]) was found
+    /// below the best match. With one transformed mean that bound is the cell's
+    /// distance itself, the same sums in the same order, and the check is not repeated.
+    #[inline]
+    fn visit_below_bound(&mut self, m: u32, key: [i32; 3]) {
+        if self.transformed.len() == 1 { self.test(m) } else { self.visit(m, key) }
+    }
+
+    /// Tests the usable surfels of model node `m` (not `NONE`) against the node's.
+    #[inline]
+    fn test(&mut self, m: u32) {
         let (model, scene) = (self.input.terms.model, self.input.terms.scene);
         let p = self.input.params;
         let mnode = &model.nodes()[m as usize];
@@ -369,6 +377,60 @@ impl Search<'_> {
 }
 
 impl Search<'_> {
+    /// Bootstrapping (§4.1): visits the 27-neighbourhood of the previous match (cell
+    /// `key`, neighbour row `neighbors`), the match itself first, then the neighbours in
+    /// index order, skipping cells that cannot beat the best match before reading them:
+    /// per axis, the smallest squared distance of any transformed mean to each slab of
+    /// cells bounds the distance to a cell from below (as in [`Search::cube`]). The same
+    /// cells are tested as by visiting all 27, in the same order.
+    fn neighbourhood(&mut self, key: [i32; 3], neighbors: &[u32; 27]) {
+        self.visit(neighbors[SELF_NEIGHBOR], key);
+        let slab = self.slabs([key[0] - 1, key[1] - 1, key[2] - 1], [3; 3]);
+        for (a, &dx) in slab[0].iter().enumerate().take(3) {
+            if dx >= self.best {
+                self.second = self.second.min(dx);
+                continue;
+            }
+            for (b, &dy) in slab[1].iter().enumerate().take(3) {
+                let dxy = dx + dy;
+                if dxy >= self.best {
+                    self.second = self.second.min(dxy);
+                    continue;
+                }
+                for (c, &dz) in slab[2].iter().enumerate().take(3) {
+                    let k = 9 * a + 3 * b + c;
+                    let m = neighbors[k];
+                    if k == SELF_NEIGHBOR || m == NONE {
+                        continue;
+                    }
+                    let d = dxy + dz;
+                    if d >= self.best {
+                        self.second = self.second.min(d);
+                        continue;
+                    }
+                    let o = NEIGHBOR_OFFSETS[k];
+                    self.visit_below_bound(m, [key[0] + o[0], key[1] + o[1], key[2] + o[2]]);
+                }
+            }
+        }
+    }
+
+    /// Per axis `i` and cell `j < n[i]` from `lo[i]`: the smallest squared distance of
+    /// any transformed mean to that slab of cells (infinite beyond `n[i]`).
+    fn slabs(&self, lo: [i32; 3], n: [usize; 3]) -> [[f64; 5]; 3] {
+        let mut slab = [[f64::INFINITY; 5]; 3];
+        for (i, axis) in slab.iter_mut().enumerate() {
+            for (j, v) in axis.iter_mut().enumerate().take(n[i]) {
+                let cell_lo = (lo[i] + j as i32) as f64 * self.res;
+                for (_, _, p) in self.transformed {
+                    let d = (cell_lo - p[i]).max(p[i] - cell_lo - self.res).max(0.0);
+                    *v = v.min(d * d);
+                }
+            }
+        }
+        slab
+    }
+
     /// Visits every model node at `level` whose cell intersects the cube of half-size
     /// `radius` (≤ 2 cells) around `center` — the cell containing the centre first, so
     /// that the best match is found early — skipping cells that cannot beat the best
@@ -408,16 +470,7 @@ impl Search<'_> {
         }
         // Per axis, the smallest squared distance of any transformed mean to each cell
         // slab: their sum bounds the distance to a cell from below.
-        let mut slab = [[f64::INFINITY; 5]; 3];
-        for (i, axis) in slab.iter_mut().enumerate() {
-            for (j, v) in axis.iter_mut().enumerate().take(n[i]) {
-                let cell_lo = (lo[i] + j as i32) as f64 * self.res;
-                for (_, _, p) in self.transformed {
-                    let d = (cell_lo - p[i]).max(p[i] - cell_lo - self.res).max(0.0);
-                    *v = v.min(d * d);
-                }
-            }
-        }
+        let slab = self.slabs(lo, n);
         for (a, &dx) in slab[0].iter().enumerate().take(n[0]) {
             if dx >= self.best {
                 self.second = self.second.min(dx);
@@ -441,7 +494,7 @@ impl Search<'_> {
                         && here != visited_seed
                         && let Some(m) = cells.get([a, b, c])
                     {
-                        self.visit(m, [lo[0] + a as i32, lo[1] + b as i32, lo[2] + c as i32]);
+                        self.visit_below_bound(m, [lo[0] + a as i32, lo[1] + b as i32, lo[2] + c as i32]);
                     }
                 }
             }

@@ -206,5 +206,5 @@ pub(crate) fn sum(
     }
     let mut total = Partial::ZERO;
     partials[..offsets[MAX_LEVELS]].iter().for_each(|p| total.add(p));
-    total
+    total.mirrored()
 }

@@ -84,20 +84,42 @@ impl Partial {
         matched: 0,
     };
 
+    /// Adds a term. The Hessians of the terms are symmetric: only their upper triangle
+    /// is summed, and [`Partial::mirrored`] completes the total.
     #[inline]
     pub(crate) fn add_term(&mut self, cost: f64, gradient: &Vector6<f64>, hessian: &Matrix6<f64>) {
         self.cost += cost;
         self.gradient += gradient;
-        self.hessian += hessian;
+        add_upper(&mut self.hessian, hessian);
     }
 
+    /// Adds another partial sum (upper triangle of the Hessian, as [`Partial::add_term`]).
     pub(crate) fn add(&mut self, o: &Partial) {
         self.cost += o.cost;
         self.gradient += o.gradient;
-        self.hessian += o.hessian;
+        add_upper(&mut self.hessian, &o.hessian);
         self.count += o.count;
         self.previous_cost += o.previous_cost;
         self.matched += o.matched;
+    }
+}
+
+impl Partial {
+    /// The total with its Hessian's lower triangle copied from the summed upper one
+    /// (each entry then holds the same sum as its mirror image would have).
+    pub(crate) fn mirrored(mut self) -> Self {
+        self.hessian.fill_lower_triangle_with_upper_triangle();
+        self
+    }
+}
+
+/// `acc += h` on the upper triangle.
+#[inline(always)]
+fn add_upper(acc: &mut Matrix6<f64>, h: &Matrix6<f64>) {
+    for j in 0..6 {
+        for i in 0..=j {
+            acc[(i, j)] += h[(i, j)];
+        }
     }
 }
 
