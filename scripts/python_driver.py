@@ -94,10 +94,11 @@ def main() -> int:
         depth = np.asarray(Image.open(depth_path), dtype=np.uint16)
         sample = publisher.loan_uninit()
         f = ctypes.cast(sample.payload_ptr, ctypes.POINTER(RgbdFrameVga)).contents
-        f.header = FrameHeader(LAYOUT_VERSION, 640, 480, 0, stamp, time.time_ns(), seq,
+        f.header = FrameHeader(LAYOUT_VERSION, 640, 480, 0, stamp, 0, seq,
                                535.4, 539.2, 320.1, 247.6, (ctypes.c_double * 8)(), 1 / 5000)
         np.ctypeslib.as_array(f.rgb)[:] = rgb.reshape(-1)
         np.ctypeslib.as_array(f.depth)[:] = depth.reshape(-1)
+        f.header.send_stamp_ns = time.time_ns()  # as it is sent (docs/wire-format.md)
         sample.assume_init().send()
         notifier.notify()
         total += 1

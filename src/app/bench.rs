@@ -295,24 +295,39 @@ pub fn tracking_ms(
         .groundtruth
         .as_ref()
         .context("the tracking benchmark starts at ground truth: groundtruth.txt needed")?;
-    let pool = super::dataset::thread_pool(job.threads)?;
-    let mut out = StepOutput::new(tracker.len());
-    let mut ms = Vec::new();
-    for _ in 0..job.passes {
-        let start =
-            gt.interpolate(decoded[0].stamp_ns as f64 * 1e-9, 0.05).context("no ground truth at the first frame")?;
-        for (k, w) in world_from_model.iter().enumerate() {
-            tracker.reinitialise(k, &(start.inverse() * w));
+    let start =
+        gt.interpolate(decoded[0].stamp_ns as f64 * 1e-9, 0.05).context("no ground truth at the first frame")?;
+    // The frames run as in the live tracker (`LiveTracker::start`): on a thread that is
+    // itself worker 0 of the pool, so that each frame's work starts on that thread
+    // instead of being handed to a pool thread (which, after an idle gap, may wake
+    // late). rayon cannot release a thread from a pool it joined: the loop gets a
+    // thread of its own.
+    let timed = |tracker: &mut crate::tracking::Tracker| -> Result<Vec<f64>> {
+        let mut pool = rayon::ThreadPoolBuilder::new().use_current_thread();
+        if let Some(t) = job.threads {
+            pool = pool.num_threads(t);
         }
-        for d in &decoded {
-            let frame = RgbdFrame::new(d.stamp_ns, cam, &d.rgb, &d.depth)?;
-            if !gap.is_zero() {
-                std::thread::sleep(gap);
+        let pool = pool.build().context("starting the thread pool")?;
+        let mut out = StepOutput::new(tracker.len());
+        let mut ms = Vec::new();
+        for _ in 0..job.passes {
+            for (k, w) in world_from_model.iter().enumerate() {
+                tracker.reinitialise(k, &(start.inverse() * w));
             }
-            track_frame(&mut tracker, &pool, &frame, &mut out);
-            ms.push(f64::from(out.build_ms[0] + out.register_ms[0]));
+            for d in &decoded {
+                let frame = RgbdFrame::new(d.stamp_ns, cam, &d.rgb, &d.depth)?;
+                if !gap.is_zero() {
+                    std::thread::sleep(gap);
+                }
+                track_frame(tracker, &pool, &frame, &mut out);
+                ms.push(f64::from(out.build_ms[0] + out.register_ms[0]));
+            }
         }
-    }
+        Ok(ms)
+    };
+    let mut ms = std::thread::scope(|s| {
+        s.spawn(|| timed(&mut tracker)).join().map_err(|_| anyhow::anyhow!("the tracking benchmark's thread failed"))
+    })??;
     if ms.is_empty() {
         bail!("no tracking frames timed (--passes 0?)");
     }

@@ -276,12 +276,13 @@ fn publish<F: WireFrame>(
                 break;
             }
         };
-        let mut header = FrameHeader::for_camera(&frame.camera, frame.stamp_ns, summary.sent);
+        let header = FrameHeader::for_camera(&frame.camera, frame.stamp_ns, summary.sent);
         let loan = publisher.loan_uninit().map_err(|e| IpcError::new(format!("loaning a frame on {name}"), e))?;
-        header.send_stamp_ns = now_ns();
-        write_frame(loan, &header, frame.rgb, frame.depth)?
-            .send()
-            .map_err(|e| IpcError::new(format!("sending on {name}"), e))?;
+        let mut sample = write_frame(loan, &header, frame.rgb, frame.depth)?;
+        // Stamped when the frame is complete in shared memory, as it is sent: the copy
+        // into the loan is the driver's own work (docs/wire-format.md).
+        sample.payload_mut().header_mut().send_stamp_ns = now_ns();
+        sample.send().map_err(|e| IpcError::new(format!("sending on {name}"), e))?;
         notifier.notify().map_err(|e| IpcError::new(format!("notifying on {name}"), e))?;
         summary.sent += 1;
     }

@@ -119,6 +119,8 @@ pub trait WireFrame: std::fmt::Debug + ZeroCopySend + Send + Sync + 'static {
     const HEIGHT: u32;
     /// The header.
     fn header(&self) -> &FrameHeader;
+    /// The header, to complete it in place (e.g. the send stamp, just before sending).
+    fn header_mut(&mut self) -> &mut FrameHeader;
     /// Row-major RGB8 pixels.
     fn rgb(&self) -> &[u8];
     /// Row-major depth pixels (0 = no measurement).
@@ -167,6 +169,9 @@ macro_rules! wire_frame {
             const HEIGHT: u32 = $h;
             fn header(&self) -> &FrameHeader {
                 &self.header
+            }
+            fn header_mut(&mut self) -> &mut FrameHeader {
+                &mut self.header
             }
             fn rgb(&self) -> &[u8] {
                 &self.rgb
