@@ -382,7 +382,8 @@ impl Search<'_> {
     /// index order, skipping cells that cannot beat the best match before reading them:
     /// per axis, the smallest squared distance of any transformed mean to each slab of
     /// cells bounds the distance to a cell from below (as in [`Search::cube`]). The same
-    /// cells are tested as by visiting all 27, in the same order.
+    /// cells are tested as by visiting all 27, in the same order, so the match is the
+    /// same; the lower bound kept for the cache (`second`) can be smaller, which is safe.
     fn neighbourhood(&mut self, key: [i32; 3], neighbors: &[u32; 27]) {
         self.visit(neighbors[SELF_NEIGHBOR], key);
         let slab = self.slabs([key[0] - 1, key[1] - 1, key[2] - 1], [3; 3]);
