@@ -15,14 +15,14 @@
 //! own record. The pass can also sum the cost terms of the new associations (so that
 //! association and the LM system take one sweep), per level chunk in fixed slots.
 
+use super::cells::{CubeCells, axis_distance, cell_distance2, min_of};
 use super::evaluate::{Sum, SumInput, slot_offsets};
 use super::params::RegistrationParams;
 use super::workspace::{Association, NODE_CHUNK, Partial, PassState};
 use crate::frame::rays::VIEW_AXES;
 use crate::geometry::Pose;
 use crate::map::tree::NEIGHBOR_OFFSETS;
-use crate::map::tree::octant;
-use crate::map::{MAX_LEVELS, NONE, Node, SELF_NEIGHBOR, descriptor_distance2, neighbor_index};
+use crate::map::{MAX_LEVELS, NONE, Node, SELF_NEIGHBOR, descriptor_distance2};
 use nalgebra::Vector3;
 use rayon::prelude::*;
 
@@ -299,7 +299,7 @@ impl Search<'_> {
         }
         // The model mean lies in its cell: skip cells farther than the best match.
         let near =
-            self.transformed.iter().map(|(_, _, p)| cell_distance2(p, key, self.res)).fold(f64::INFINITY, f64::min);
+            self.transformed.iter().map(|(_, _, p)| cell_distance2(p, key, self.res)).fold(f64::INFINITY, min_of);
         if near >= self.best {
             self.second = self.second.min(near);
             return;
@@ -424,8 +424,8 @@ impl Search<'_> {
             for (j, v) in axis.iter_mut().enumerate().take(n[i]) {
                 let cell_lo = (lo[i] + j as i32) as f64 * self.res;
                 for (_, _, p) in self.transformed {
-                    let d = (cell_lo - p[i]).max(p[i] - cell_lo - self.res).max(0.0);
-                    *v = v.min(d * d);
+                    let d = axis_distance(cell_lo, p[i], self.res);
+                    *v = min_of(*v, d * d);
                 }
             }
         }
@@ -501,82 +501,4 @@ impl Search<'_> {
             }
         }
     }
-}
-
-/// The model nodes of one level in a cube of at most 5 cells per axis, found through
-/// the parent cell containing the cube's centre: the cube spans at most three parent
-/// cells per axis, all in that parent's 27-neighbourhood. Per axis and cell the parts
-/// of the neighbour index and of the octant are computed once.
-struct CubeCells<'a> {
-    model: &'a crate::map::SurfelMap,
-    level: usize,
-    /// `level` is the model's coarsest: its cells have no parents.
-    top: bool,
-    lo: [i32; 3],
-    /// The centre's parent and its neighbours, if it exists.
-    parent: Option<&'a [u32; 27]>,
-    /// Per axis and cell of the cube: its term of the parent's neighbour index.
-    neighbor_part: [[u8; 5]; 3],
-    /// Per axis and cell of the cube: its bit of the octant in its parent.
-    octant_part: [[u8; 5]; 3],
-}
-
-impl<'a> CubeCells<'a> {
-    fn new(model: &'a crate::map::SurfelMap, level: usize, lo: [i32; 3], k0: [i32; 3], n: [usize; 3]) -> Self {
-        let top = level + 1 >= model.num_levels();
-        let parent = if top { None } else { model.find(level + 1, [k0[0] >> 1, k0[1] >> 1, k0[2] >> 1]) };
-        let mut neighbor_part = [[0u8; 5]; 3];
-        let mut octant_part = [[0u8; 5]; 3];
-        for i in 0..3 {
-            for j in 0..n[i] {
-                let k = lo[i] + j as i32;
-                // The other axes at offset −1 and key 0 add nothing to either sum.
-                let d = (k >> 1) - (k0[i] >> 1);
-                let (neighbor, bit) = match i {
-                    0 => (neighbor_index(d, -1, -1), octant([k, 0, 0])),
-                    1 => (neighbor_index(-1, d, -1), octant([0, k, 0])),
-                    _ => (neighbor_index(-1, -1, d), octant([0, 0, k])),
-                };
-                (neighbor_part[i][j], octant_part[i][j]) = (neighbor as u8, bit as u8);
-            }
-        }
-        CubeCells { model, level, top, lo, parent: parent.map(|p| model.neighbors(p)), neighbor_part, octant_part }
-    }
-
-    /// The model node of the cell at offset `j` from the cube's low corner.
-    #[inline(always)]
-    fn get(&self, j: [usize; 3]) -> Option<u32> {
-        let model = self.model;
-        let (pn, octant) = match self.parent {
-            Some(neighbors) => {
-                let (np, op) = (&self.neighbor_part, &self.octant_part);
-                let pn = neighbors[(np[0][j[0]] + np[1][j[1]] + np[2][j[2]]) as usize];
-                (pn, (op[0][j[0]] | op[1][j[1]] | op[2][j[2]]) as usize)
-            }
-            None => {
-                let k = [0, 1, 2].map(|i| self.lo[i] + j[i] as i32);
-                if self.top {
-                    return model.find(self.level, k);
-                }
-                (model.find(self.level + 1, [k[0] >> 1, k[1] >> 1, k[2] >> 1])?, octant(k))
-            }
-        };
-        if pn == NONE {
-            return None;
-        }
-        let c = model.nodes()[pn as usize].children[octant];
-        (c != NONE).then_some(c)
-    }
-}
-
-/// Squared distance from `p` to the cell `key` of edge `res`.
-#[inline]
-fn cell_distance2(p: &Vector3<f64>, key: [i32; 3], res: f64) -> f64 {
-    let mut d2 = 0.0;
-    for i in 0..3 {
-        let lo = key[i] as f64 * res;
-        let d = (lo - p[i]).max(p[i] - lo - res).max(0.0);
-        d2 += d * d;
-    }
-    d2
 }

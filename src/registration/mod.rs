@@ -16,6 +16,7 @@
 //! allocated here.
 
 mod associate;
+mod cells;
 mod cost;
 mod evaluate;
 pub mod likelihood;
