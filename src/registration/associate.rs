@@ -387,21 +387,45 @@ impl Search<'_> {
     fn neighbourhood(&mut self, key: [i32; 3], neighbors: &[u32; 27]) {
         self.visit(neighbors[SELF_NEIGHBOR], key);
         let slab = self.slabs([key[0] - 1, key[1] - 1, key[2] - 1], [3; 3]);
-        for (a, &dx) in slab[0].iter().enumerate().take(3) {
+        let index = |j: [usize; 3]| 9 * j[0] + 3 * j[1] + j[2];
+        self.visit_grid(
+            &slab,
+            [3; 3],
+            |j| index(j) == SELF_NEIGHBOR || neighbors[index(j)] == NONE,
+            |j| {
+                let k = index(j);
+                let o = NEIGHBOR_OFFSETS[k];
+                Some((neighbors[k], [key[0] + o[0], key[1] + o[1], key[2] + o[2]]))
+            },
+        );
+    }
+
+    /// Visits, in index order, the cells `j < n` of a grid of slab bounds `slab` (see
+    /// [`Search::slabs`]), skipping before any memory read the planes, rows and cells
+    /// that cannot beat the best match (their bound lowers `second`, the cache's bound).
+    /// A cell that `known_empty` (decided without a memory read of the model) passes
+    /// over is skipped without that; the others are visited if `cell` gives their node
+    /// and key (`None`: no node, or visited already).
+    fn visit_grid(
+        &mut self,
+        slab: &[[f64; 5]; 3],
+        n: [usize; 3],
+        known_empty: impl Fn([usize; 3]) -> bool,
+        cell: impl Fn([usize; 3]) -> Option<(u32, [i32; 3])>,
+    ) {
+        for (a, &dx) in slab[0].iter().enumerate().take(n[0]) {
             if dx >= self.best {
                 self.second = self.second.min(dx);
                 continue;
             }
-            for (b, &dy) in slab[1].iter().enumerate().take(3) {
+            for (b, &dy) in slab[1].iter().enumerate().take(n[1]) {
                 let dxy = dx + dy;
                 if dxy >= self.best {
                     self.second = self.second.min(dxy);
                     continue;
                 }
-                for (c, &dz) in slab[2].iter().enumerate().take(3) {
-                    let k = 9 * a + 3 * b + c;
-                    let m = neighbors[k];
-                    if k == SELF_NEIGHBOR || m == NONE {
+                for (c, &dz) in slab[2].iter().enumerate().take(n[2]) {
+                    if known_empty([a, b, c]) {
                         continue;
                     }
                     let d = dxy + dz;
@@ -409,8 +433,9 @@ impl Search<'_> {
                         self.second = self.second.min(d);
                         continue;
                     }
-                    let o = NEIGHBOR_OFFSETS[k];
-                    self.visit_below_bound(m, [key[0] + o[0], key[1] + o[1], key[2] + o[2]]);
+                    if let Some((m, key)) = cell([a, b, c]) {
+                        self.visit_below_bound(m, key);
+                    }
                 }
             }
         }
@@ -472,33 +497,16 @@ impl Search<'_> {
         // Per axis, the smallest squared distance of any transformed mean to each cell
         // slab: their sum bounds the distance to a cell from below.
         let slab = self.slabs(lo, n);
-        for (a, &dx) in slab[0].iter().enumerate().take(n[0]) {
-            if dx >= self.best {
-                self.second = self.second.min(dx);
-                continue;
-            }
-            for (b, &dy) in slab[1].iter().enumerate().take(n[1]) {
-                let dxy = dx + dy;
-                if dxy >= self.best {
-                    self.second = self.second.min(dxy);
-                    continue;
-                }
-                for (c, &dz) in slab[2].iter().enumerate().take(n[2]) {
-                    let d = dxy + dz;
-                    if d >= self.best {
-                        // No memory read: a lower bound for the cache is all we need.
-                        self.second = self.second.min(d);
-                        continue;
-                    }
-                    let here = flat([a, b, c]);
-                    if here != visited_centre
-                        && here != visited_seed
-                        && let Some(m) = cells.get([a, b, c])
-                    {
-                        self.visit_below_bound(m, [lo[0] + a as i32, lo[1] + b as i32, lo[2] + c as i32]);
-                    }
-                }
-            }
-        }
+        // Cells are looked up only when their bound is below the best match.
+        self.visit_grid(
+            &slab,
+            n,
+            |_| false,
+            |j| {
+                let here = flat(j);
+                let m = if here != visited_centre && here != visited_seed { cells.get(j) } else { None };
+                m.map(|m| (m, [lo[0] + j[0] as i32, lo[1] + j[1] as i32, lo[2] + j[2] as i32]))
+            },
+        );
     }
 }

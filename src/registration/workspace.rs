@@ -102,9 +102,7 @@ impl Partial {
         self.previous_cost += o.previous_cost;
         self.matched += o.matched;
     }
-}
 
-impl Partial {
     /// The total with its Hessian's lower triangle copied from the summed upper one
     /// (each entry then holds the same sum as its mirror image would have).
     pub(crate) fn mirrored(mut self) -> Self {
