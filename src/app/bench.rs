@@ -258,6 +258,10 @@ pub struct TrackingTimes {
     /// Every later frame, over all passes (later passes restart at ground truth but keep
     /// the ray table).
     pub steady_ms: Vec<f64>,
+    /// Of `steady_ms`, the scene map (region, gate, map building) per frame.
+    pub scene_ms: Vec<f64>,
+    /// Of `steady_ms`, the registration and the quality per frame.
+    pub register_ms: Vec<f64>,
 }
 
 /// Times the tracker's per-frame step (scene map + registration + quality, per object)
@@ -302,7 +306,7 @@ pub fn tracking_ms(
     // instead of being handed to a pool thread (which, after an idle gap, may wake
     // late). rayon cannot release a thread from a pool it joined: the loop gets a
     // thread of its own.
-    let timed = |tracker: &mut crate::tracking::Tracker| -> Result<Vec<f64>> {
+    let timed = |tracker: &mut crate::tracking::Tracker| -> Result<Vec<(f64, f64)>> {
         let mut pool = rayon::ThreadPoolBuilder::new().use_current_thread();
         if let Some(t) = job.threads {
             pool = pool.num_threads(t);
@@ -320,7 +324,7 @@ pub fn tracking_ms(
                     std::thread::sleep(gap);
                 }
                 track_frame(tracker, &pool, &frame, &mut out);
-                ms.push(f64::from(out.build_ms[0] + out.register_ms[0]));
+                ms.push((f64::from(out.build_ms[0]), f64::from(out.register_ms[0])));
             }
         }
         Ok(ms)
@@ -331,6 +335,11 @@ pub fn tracking_ms(
     if ms.is_empty() {
         bail!("no tracking frames timed (--passes 0?)");
     }
-    let first_ms = ms.remove(0);
-    Ok(TrackingTimes { first_ms, steady_ms: ms })
+    let (first_scene, first_register) = ms.remove(0);
+    Ok(TrackingTimes {
+        first_ms: first_scene + first_register,
+        steady_ms: ms.iter().map(|(s, r)| s + r).collect(),
+        scene_ms: ms.iter().map(|m| m.0).collect(),
+        register_ms: ms.iter().map(|m| m.1).collect(),
+    })
 }

@@ -260,20 +260,22 @@ pub fn bench(a: BenchArgs) -> Result<()> {
         let gap_note =
             if gap.is_zero() { String::new() } else { format!(", {} ms idle before each frame", a.frame_gap_ms) };
         println!(
-            "\n| tracking (object '{}'{gap_note}) | threads | frames | per frame median / p99 (ms) | first frame (ms) |",
+            "\n| tracking (object '{}'{gap_note}) | threads | frames | per frame median / p99 (ms) | scene map / registration median (ms) | first frame (ms) |",
             config.objects[0].name
         );
-        println!("|---|---|---|---|---|");
+        println!("|---|---|---|---|---|---|");
         for &res in &job.resolutions {
             let half = res == app::bench::Resolution::Qvga;
             let t = app::bench::tracking_ms(&config, &job, a.tracking_first_frame, half, gap)?;
-            let ms = &t.steady_ms;
+            let (ms, median) = (&t.steady_ms, |v: &[f64]| app::report::percentile(v, 0.5));
             println!(
-                "| {} | {threads} | {} | {:.2} / {:.2} | {:.2} |",
+                "| {} | {threads} | {} | {:.2} / {:.2} | {:.2} / {:.2} | {:.2} |",
                 if half { "QVGA 320×240" } else { "VGA 640×480" },
                 ms.len(),
-                app::report::percentile(ms, 0.5),
+                median(ms),
                 app::report::percentile(ms, 0.99),
+                median(&t.scene_ms),
+                median(&t.register_ms),
                 t.first_ms
             );
         }
