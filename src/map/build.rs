@@ -285,4 +285,41 @@ mod tests {
         assert_eq!(points(&margin), points(&expected));
         assert_ne!(surfels(&margin), surfels(&expected), "the region's edges are borders: the margin moves them");
     }
+
+    #[test]
+    fn finding_a_cell_near_a_node_gives_the_node_found_by_descent() {
+        let camera = CameraModel {
+            width: 160,
+            height: 120,
+            intrinsics: PinholeIntrinsics { fx: 134.0, fy: 135.0, cx: 80.0, cy: 62.0 },
+            distortion: crate::geometry::NO_DISTORTION,
+            depth_scale_m: 0.0002,
+        };
+        let (rgb, depth) = wall(&camera);
+        let frame = RgbdFrame::new(0, camera, &rgb, &depth).expect("consistent frame");
+        let capacity = MapCapacity::for_image(160 * 120);
+        let mut map = SurfelMap::new(MapParams::default(), capacity).expect("valid parameters");
+        MapBuilder::new(160, 120, capacity.surfels).build(&frame, &mut map).expect("builds");
+        let (mut near, mut far) = (0, 0);
+        for (i, node) in map.nodes().iter().enumerate() {
+            let level = node.level as usize;
+            // Every cell within three cells of the node, present or not.
+            for dx in -3..=3 {
+                for dy in -3..=3 {
+                    for dz in -3..=3 {
+                        let key = [node.key[0] + dx, node.key[1] + dy, node.key[2] + dz];
+                        let found = map.find_near(level, key, i as u32);
+                        assert_eq!(found, map.find(level, key), "node {i}, offset ({dx}, {dy}, {dz})");
+                        let within = dx.abs() <= 1 && dy.abs() <= 1 && dz.abs() <= 1;
+                        (near, far) = if within { (near + found.is_some() as usize, far) } else { (near, far + 1) };
+                    }
+                }
+            }
+            // A node of another level is no neighbour: found by descent.
+            if level > 0 {
+                assert_eq!(map.find_near(level - 1, node.key, i as u32), map.find(level - 1, node.key));
+            }
+        }
+        assert!(near > map.nodes().len() && far > 0, "{near} cells found through neighbour tables");
+    }
 }

@@ -223,6 +223,21 @@ impl SurfelMap {
         self.tree.find(level, key)
     }
 
+    /// [`SurfelMap::find`] starting from `near`, a node of the same level: a key in its
+    /// 27-neighbourhood is read from its neighbour table (no descent from the coarsest
+    /// level), any other is found by descent. The same node either way.
+    #[inline]
+    pub fn find_near(&self, level: usize, key: [i32; 3], near: u32) -> Option<u32> {
+        let n = &self.tree.nodes[near as usize];
+        let d = [key[0].wrapping_sub(n.key[0]), key[1].wrapping_sub(n.key[1]), key[2].wrapping_sub(n.key[2])];
+        if n.level as usize == level && d.iter().all(|&v| (-1..=1).contains(&v)) {
+            let m = self.tree.neighbors[near as usize][neighbor_index(d[0], d[1], d[2])];
+            (m != NONE).then_some(m)
+        } else {
+            self.find(level, key)
+        }
+    }
+
     /// Capacity in surfels.
     pub fn surfel_capacity(&self) -> usize {
         self.surfel_capacity

@@ -479,7 +479,7 @@ impl Search<'_> {
         let lo = [0, 1, 2].map(|i| lo[i].max(k0[i] - 2));
         let hi = [0, 1, 2].map(|i| hi[i].min(k0[i] + 2));
         let n = [0, 1, 2].map(|i| (hi[i] - lo[i] + 1) as usize);
-        let cells = CubeCells::new(model, level, lo, k0, n);
+        let cells = CubeCells::new(model, level, lo, k0, n, seed.map(|(m, _)| m));
         let j0 = [0, 1, 2].map(|i| (k0[i] - lo[i]) as usize);
         let seed = seed.filter(|(_, k)| (0..3).all(|i| k[i] >= lo[i] && k[i] <= hi[i]));
         let js = seed.map(|(_, k)| [0, 1, 2].map(|i| (k[i] - lo[i]) as usize));

@@ -9,7 +9,9 @@ use nalgebra::Vector3;
 /// The model nodes of one level in a cube of at most 5 cells per axis, found through
 /// the parent cell containing the cube's centre: the cube spans at most three parent
 /// cells per axis, all in that parent's 27-neighbourhood. Per axis and cell the parts
-/// of the neighbour index and of the octant are computed once.
+/// of the neighbour index and of the octant are computed once. The parent is found
+/// from a node `near` the cube (the search's seed: the previous match) through its
+/// parent's neighbour table when it can be.
 pub(super) struct CubeCells<'a> {
     model: &'a crate::map::SurfelMap,
     level: usize,
@@ -31,9 +33,18 @@ impl<'a> CubeCells<'a> {
         lo: [i32; 3],
         k0: [i32; 3],
         n: [usize; 3],
+        near: Option<u32>,
     ) -> Self {
         let top = level + 1 >= model.num_levels();
-        let parent = if top { None } else { model.find(level + 1, [k0[0] >> 1, k0[1] >> 1, k0[2] >> 1]) };
+        let parent = if top {
+            None
+        } else {
+            let key = [k0[0] >> 1, k0[1] >> 1, k0[2] >> 1];
+            match near.map(|m| model.nodes()[m as usize].parent) {
+                Some(p) if p != NONE => model.find_near(level + 1, key, p),
+                _ => model.find(level + 1, key),
+            }
+        };
         let mut neighbor_part = [[0u8; 5]; 3];
         let mut octant_part = [[0u8; 5]; 3];
         for i in 0..3 {

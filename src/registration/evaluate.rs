@@ -184,7 +184,8 @@ pub(crate) fn slot_offsets(scene: &SurfelMap, finest: usize, coarsest: usize) ->
 }
 
 /// Sums `what` over all associations into `partials` (one per level chunk) and returns
-/// the total.
+/// the total. Unlike association, a sum does not depend on other levels' results: the
+/// chunks of all levels run in one parallel loop.
 pub(crate) fn sum(
     input: &SumInput,
     assoc: &[Association],
@@ -193,18 +194,20 @@ pub(crate) fn sum(
     what: Sum,
 ) -> Partial {
     let offsets = slot_offsets(input.scene, levels.0, levels.1);
-    for level in levels.0..=levels.1 {
+    let slots = offsets[MAX_LEVELS];
+    partials[..slots].par_iter_mut().enumerate().for_each(|(slot, out)| {
+        // The level of the slot: the coarsest whose slots start at or before it (an
+        // empty level starts where the next one does).
+        let level = (levels.0..=levels.1).rev().find(|&l| offsets[l] <= slot).unwrap_or(levels.0);
         let range = input.scene.level_nodes(level);
-        let slots = &mut partials[offsets[level]..offsets[level] + range.len().div_ceil(NODE_CHUNK)];
-        assoc[range].par_chunks(NODE_CHUNK).zip(slots.par_iter_mut()).for_each(|(chunk, out)| {
-            let mut acc = Partial::ZERO;
-            for a in chunk.iter().filter(|a| a.is_matched()) {
-                input.accumulate(a, what, &mut acc);
-            }
-            *out = acc;
-        });
-    }
+        let start = range.start + (slot - offsets[level]) * NODE_CHUNK;
+        let mut acc = Partial::ZERO;
+        for a in assoc[start..(start + NODE_CHUNK).min(range.end)].iter().filter(|a| a.is_matched()) {
+            input.accumulate(a, what, &mut acc);
+        }
+        *out = acc;
+    });
     let mut total = Partial::ZERO;
-    partials[..offsets[MAX_LEVELS]].iter().for_each(|p| total.add(p));
+    partials[..slots].iter().for_each(|p| total.add(p));
     total.mirrored()
 }
