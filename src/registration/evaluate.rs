@@ -80,16 +80,29 @@ impl<'a> SumInput<'a> {
     /// Adds the term of one association to `acc`.
     #[inline]
     pub(crate) fn accumulate(&self, a: &Association, what: Sum, acc: &mut Partial) {
+        add(&self.term(a), what, acc);
+    }
+
+    /// [`SumInput::accumulate`], and the LM system (Eq. 5) of the same term into `lm`.
+    #[inline]
+    fn accumulate_with_lm(&self, a: &Association, what: Sum, acc: &mut Partial, lm: &mut Partial) {
         let t = self.term(a);
-        let ok = match what {
-            Sum::LmCost => mahalanobis(&t).map(|e| acc.cost += 0.5 * e),
-            Sum::LikelihoodCost => likelihood_cost(&t).map(|e| acc.cost += e),
-            Sum::LmSystem => lm_term(&t).map(|(e, g, h)| acc.add_term(0.5 * e, &g, &h)),
-            Sum::LikelihoodSystem => likelihood_term(&t).map(|(e, g, h)| acc.add_term(e, &g, &h)),
-        };
-        if ok.is_some() {
-            acc.count += 1;
-        }
+        add(&t, what, acc);
+        add(&t, Sum::LmSystem, lm);
+    }
+}
+
+/// Adds `what` of one term to `acc`.
+#[inline(always)]
+fn add(t: &TermInput, what: Sum, acc: &mut Partial) {
+    let ok = match what {
+        Sum::LmCost => mahalanobis(t).map(|e| acc.cost += 0.5 * e),
+        Sum::LikelihoodCost => likelihood_cost(t).map(|e| acc.cost += e),
+        Sum::LmSystem => lm_term(t).map(|(e, g, h)| acc.add_term(0.5 * e, &g, &h)),
+        Sum::LikelihoodSystem => likelihood_term(t).map(|(e, g, h)| acc.add_term(e, &g, &h)),
+    };
+    if ok.is_some() {
+        acc.count += 1;
     }
 }
 
@@ -196,18 +209,58 @@ pub(crate) fn sum(
     let offsets = slot_offsets(input.scene, levels.0, levels.1);
     let slots = offsets[MAX_LEVELS];
     partials[..slots].par_iter_mut().enumerate().for_each(|(slot, out)| {
-        // The level of the slot: the coarsest whose slots start at or before it (an
-        // empty level starts where the next one does).
-        let level = (levels.0..=levels.1).rev().find(|&l| offsets[l] <= slot).unwrap_or(levels.0);
-        let range = input.scene.level_nodes(level);
-        let start = range.start + (slot - offsets[level]) * NODE_CHUNK;
         let mut acc = Partial::ZERO;
-        for a in assoc[start..(start + NODE_CHUNK).min(range.end)].iter().filter(|a| a.is_matched()) {
+        for a in slot_associations(input.scene, assoc, &offsets, levels, slot) {
             input.accumulate(a, what, &mut acc);
         }
         *out = acc;
     });
+    total(&partials[..slots])
+}
+
+/// [`sum`], and in the same sweep the LM system (Eq. 5) over the same associations at
+/// the same pose into `lm_partials`: the same sums, in the same order, as
+/// `sum(…, Sum::LmSystem)` with this input.
+pub(crate) fn sum_with_lm(
+    input: &SumInput,
+    assoc: &[Association],
+    (partials, lm_partials): (&mut [Partial], &mut [Partial]),
+    levels: (usize, usize),
+    what: Sum,
+) -> (Partial, Partial) {
+    let offsets = slot_offsets(input.scene, levels.0, levels.1);
+    let slots = offsets[MAX_LEVELS];
+    partials[..slots].par_iter_mut().zip(lm_partials[..slots].par_iter_mut()).enumerate().for_each(
+        |(slot, (out, lm_out))| {
+            let (mut acc, mut lm) = (Partial::ZERO, Partial::ZERO);
+            for a in slot_associations(input.scene, assoc, &offsets, levels, slot) {
+                input.accumulate_with_lm(a, what, &mut acc, &mut lm);
+            }
+            (*out, *lm_out) = (acc, lm);
+        },
+    );
+    (total(&partials[..slots]), total(&lm_partials[..slots]))
+}
+
+/// The matched associations of one slot: a chunk of the nodes of its level (the
+/// coarsest level whose slots start at or before it; an empty level starts where the
+/// next one does).
+fn slot_associations<'a>(
+    scene: &SurfelMap,
+    assoc: &'a [Association],
+    offsets: &[usize; MAX_LEVELS + 1],
+    levels: (usize, usize),
+    slot: usize,
+) -> impl Iterator<Item = &'a Association> {
+    let level = (levels.0..=levels.1).rev().find(|&l| offsets[l] <= slot).unwrap_or(levels.0);
+    let range = scene.level_nodes(level);
+    let start = range.start + (slot - offsets[level]) * NODE_CHUNK;
+    assoc[start..(start + NODE_CHUNK).min(range.end)].iter().filter(|a| a.is_matched())
+}
+
+/// The sum of partial sums, in slot order.
+fn total(partials: &[Partial]) -> Partial {
     let mut total = Partial::ZERO;
-    partials[..slots].iter().for_each(|p| total.add(p));
+    partials.iter().for_each(|p| total.add(p));
     total.mirrored()
 }

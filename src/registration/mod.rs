@@ -31,7 +31,7 @@ use crate::geometry::Pose;
 use crate::geometry::se3::compose_left;
 use crate::map::SurfelMap;
 use associate::{AssociationInput, DirCandidates, associate};
-use evaluate::{Sum, SumInput, sum};
+use evaluate::{Sum, SumInput, sum, sum_with_lm};
 use nalgebra::{Matrix6, Vector6};
 use thiserror::Error;
 use workspace::Partial;
@@ -122,7 +122,7 @@ pub fn register(
         return Err(RegistrationError::NotFinite);
     }
     ws.reset(nodes);
-    let mut solver = Solver { model, scene, params, ws, pose: *initial };
+    let mut solver = Solver { model, scene, params, ws, pose: *initial, lm_system: None };
     let (lm_iterations, converged) = solver.levenberg_marquardt()?;
     let newton_iterations = solver.newton()?;
     let overlap = solver.overlap();
@@ -148,6 +148,9 @@ struct Solver<'a> {
     params: &'a RegistrationParams,
     ws: &'a mut RegistrationWorkspace,
     pose: Pose,
+    /// The LM system (Eq. 5) over the current associations at a pose, when a sum on the
+    /// way computed it: the covariance at that pose (Eq. 6) needs no sweep of its own.
+    lm_system: Option<(Pose, Partial)>,
 }
 
 impl Solver<'_> {
@@ -158,6 +161,7 @@ impl Solver<'_> {
     /// §4.1 at the current pose, summing `what` over the new associations in the same
     /// sweep (and with `previous_cost` the LM cost of the previous associations).
     fn associate(&mut self, fresh: bool, what: Sum, interpolate: bool, previous_cost: bool) -> Partial {
+        self.lm_system = None;
         let terms = SumInput::new(self.model, self.scene, &self.pose, self.params, interpolate);
         let dirs = DirCandidates::new(&self.pose, self.params.view_dir_min_cos);
         let input = AssociationInput { terms: &terms, params: self.params, dirs };
@@ -182,6 +186,19 @@ impl Solver<'_> {
         let terms = SumInput::new(self.model, self.scene, pose, self.params, interpolate);
         let levels = self.levels();
         sum(&terms, &self.ws.assoc, &mut self.ws.partials, levels, what)
+    }
+
+    /// [`Self::sum_at`], and the LM system at `pose` in the same sweep when the
+    /// covariance would use the same terms (the same interpolation setting).
+    fn sum_at_with_lm(&mut self, pose: &Pose, what: Sum, interpolate: bool) -> (Partial, Option<Partial>) {
+        if interpolate != self.params.interpolate_lm {
+            return (self.sum_at(pose, what, interpolate), None);
+        }
+        let terms = SumInput::new(self.model, self.scene, pose, self.params, interpolate);
+        let levels = self.levels();
+        let ws = &mut *self.ws;
+        let (total, lm) = sum_with_lm(&terms, &ws.assoc, (&mut ws.partials, &mut ws.lm_partials), levels, what);
+        (total, Some(lm))
     }
 
     /// Levenberg–Marquardt on Eq. (5) (Madsen, Nielsen & Tingleff's damping update, with
@@ -262,21 +279,35 @@ impl Solver<'_> {
         let mut improved = 0;
         for it in 0..self.params.newton_iterations {
             let sys = if it == 0 {
+                // With the LM system at this pose: if no step improves, the covariance
+                // is taken here.
                 let pose = self.pose;
-                self.sum_at(&pose, Sum::LikelihoodSystem, interpolate)
+                let (sys, lm) = self.sum_at_with_lm(&pose, Sum::LikelihoodSystem, interpolate);
+                self.lm_system = lm.map(|lm| (pose, lm));
+                sys
             } else {
                 self.associate_enough(false, Sum::LikelihoodSystem, interpolate)?
             };
             let Some(chol) = sys.hessian.cholesky() else { break };
             let delta = -chol.solve(&sys.gradient);
             let candidate = compose_left(&delta, &self.pose);
-            let cost = self.sum_at(&candidate, Sum::LikelihoodCost, interpolate).cost;
+            let small = step_is_small(&delta, self.params);
+            // The last step either way (accepted or not): with the LM system at the
+            // candidate, which is final if accepted.
+            let last = small || it + 1 == self.params.newton_iterations;
+            let (cost, lm) = if last {
+                let (total, lm) = self.sum_at_with_lm(&candidate, Sum::LikelihoodCost, interpolate);
+                (total.cost, lm)
+            } else {
+                (self.sum_at(&candidate, Sum::LikelihoodCost, interpolate).cost, None)
+            };
             if cost.is_nan() || cost >= sys.cost || !is_finite(&candidate) {
                 break;
             }
             self.pose = candidate;
+            self.lm_system = lm.map(|lm| (candidate, lm));
             improved += 1;
-            if step_is_small(&delta, self.params) {
+            if small {
                 break;
             }
         }
@@ -306,7 +337,10 @@ impl Solver<'_> {
     /// sandwich reduces to `H⁻¹`, computed here as such.
     fn covariance(&mut self) -> Result<(Matrix6<f64>, usize, f64), RegistrationError> {
         let pose = self.pose;
-        let sys = self.sum_at(&pose, Sum::LmSystem, self.params.interpolate_lm);
+        let sys = match self.lm_system.take() {
+            Some((at, sys)) if at == pose => sys,
+            _ => self.sum_at(&pose, Sum::LmSystem, self.params.interpolate_lm),
+        };
         let h = (sys.hessian + sys.hessian.transpose()) * 0.5;
         let unconstrained =
             RegistrationError::Degenerate { translation_std_m: f64::INFINITY, rotation_std_rad: f64::INFINITY };

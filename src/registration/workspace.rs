@@ -139,6 +139,8 @@ pub struct RegistrationWorkspace {
     /// The associations before the last pass, to restore when LM rejects its step.
     pub(crate) assoc_backup: Vec<Association>,
     pub(crate) partials: Vec<Partial>,
+    /// Per-chunk LM systems summed alongside another sum (`evaluate::sum_with_lm`).
+    pub(crate) lm_partials: Vec<Partial>,
     pub(crate) passes: Vec<PassState>,
     capacity: usize,
 }
@@ -151,6 +153,7 @@ impl RegistrationWorkspace {
             assoc: Vec::with_capacity(scene_node_capacity),
             assoc_backup: Vec::with_capacity(scene_node_capacity),
             partials: Vec::with_capacity(chunks),
+            lm_partials: Vec::with_capacity(chunks),
             passes: Vec::with_capacity(MAX_PASSES),
             capacity: scene_node_capacity,
         }
@@ -169,6 +172,8 @@ impl RegistrationWorkspace {
         let chunks = scene_nodes.div_ceil(NODE_CHUNK) + MAX_LEVELS;
         self.partials.clear();
         self.partials.resize(chunks, Partial::ZERO);
+        self.lm_partials.clear();
+        self.lm_partials.resize(chunks, Partial::ZERO);
         self.passes.clear();
     }
 }
