@@ -79,7 +79,7 @@ pub(crate) struct AssociationInput<'a> {
 /// associations. The pass is recorded in `passes` for the cache.
 pub(crate) fn associate(
     input: &AssociationInput,
-    assoc: &mut [Association],
+    (assoc, last_cube): (&mut [Association], &mut [Association]),
     partials: &mut [Partial],
     passes: &mut Vec<PassState>,
     fresh: bool,
@@ -98,29 +98,32 @@ pub(crate) fn associate(
         let this = &mut coarser[range.start..];
         let finer = Finer { assoc: finer, offset: range.end };
         let slots = &mut partials[offsets[level]..offsets[level] + range.len().div_ceil(NODE_CHUNK)];
-        this.par_chunks_mut(NODE_CHUNK).zip(slots.par_iter_mut()).enumerate().for_each(|(c, (chunk, out))| {
-            let mut acc = Partial::ZERO;
-            for (k, a) in chunk.iter_mut().enumerate() {
-                let node = range.start + c * NODE_CHUNK + k;
-                let old = *a;
-                associate_node(input, passes, pass, node, a, &finer, fresh);
-                if a.is_matched() {
-                    acc.matched += 1;
-                    let cost_before = acc.cost;
-                    input.terms.accumulate(a, what, &mut acc);
-                    if previous_cost && old.is_matched() && what == Sum::LmSystem && a.same_pair(&old) {
-                        acc.previous_cost += acc.cost - cost_before;
-                        continue;
+        let cubes = last_cube[range.clone()].par_chunks_mut(NODE_CHUNK);
+        this.par_chunks_mut(NODE_CHUNK).zip(cubes).zip(slots.par_iter_mut()).enumerate().for_each(
+            |(c, ((chunk, cubes), out))| {
+                let mut acc = Partial::ZERO;
+                for (k, (a, cube)) in chunk.iter_mut().zip(cubes).enumerate() {
+                    let node = range.start + c * NODE_CHUNK + k;
+                    let old = *a;
+                    associate_node(input, (passes, pass), node, (a, cube), &finer, fresh);
+                    if a.is_matched() {
+                        acc.matched += 1;
+                        let cost_before = acc.cost;
+                        input.terms.accumulate(a, what, &mut acc);
+                        if previous_cost && old.is_matched() && what == Sum::LmSystem && a.same_pair(&old) {
+                            acc.previous_cost += acc.cost - cost_before;
+                            continue;
+                        }
+                    }
+                    if previous_cost && old.is_matched() {
+                        let mut prev = Partial::ZERO;
+                        input.terms.accumulate(&old, Sum::LmCost, &mut prev);
+                        acc.previous_cost += prev.cost;
                     }
                 }
-                if previous_cost && old.is_matched() {
-                    let mut prev = Partial::ZERO;
-                    input.terms.accumulate(&old, Sum::LmCost, &mut prev);
-                    acc.previous_cost += prev.cost;
-                }
-            }
-            *out = acc;
-        });
+                *out = acc;
+            },
+        );
     }
     let mut total = Partial::ZERO;
     partials[..offsets[MAX_LEVELS]].iter().for_each(|s| total.add(s));
@@ -144,12 +147,13 @@ impl Finer<'_> {
 /// A usable scene surfel of the node in work: index, mean, transformed mean.
 type Transformed = (u32, Vector3<f64>, Vector3<f64>);
 
+/// Associates one scene node: `a` is its association, `last_cube` its last cube search
+/// (which a later fresh pass, after neighbourhood searches, may find still valid).
 fn associate_node(
     input: &AssociationInput,
-    passes: &[PassState],
-    pass: usize,
+    (passes, pass): (&[PassState], usize),
     node_idx: usize,
-    a: &mut Association,
+    (a, last_cube): (&mut Association, &mut Association),
     finer: &Finer,
     fresh: bool,
 ) {
@@ -183,6 +187,13 @@ fn associate_node(
         *a = previous;
         return;
     }
+    // A fresh pass after neighbourhood searches: the node's last cube search, if it still
+    // holds, is its result (the same candidates — its cube is checked — and best match).
+    if fresh && !previous.cube && cache_holds(input, passes, last_cube, transformed, &center, radius, level) {
+        *a = *last_cube;
+        return;
+    }
+    let cube = fresh || previous.model_node == NONE;
     let mut search = Search {
         input,
         node,
@@ -193,7 +204,6 @@ fn associate_node(
         second: f64::INFINITY,
         found: Association::NONE,
     };
-    let cube = fresh || previous.model_node == NONE;
     if cube {
         let c = terms.rotation * center + terms.translation;
         // A fresh pass at a pose near the previous one: the previous match is likely
@@ -224,6 +234,9 @@ fn associate_node(
         (search.second.sqrt() - radius) as f32
     };
     *a = result;
+    if cube {
+        *last_cube = result;
+    }
 }
 
 /// Whether the search at this pass would run over the candidates of the one that gave

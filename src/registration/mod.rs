@@ -166,7 +166,15 @@ impl Solver<'_> {
         let dirs = DirCandidates::new(&self.pose, self.params.view_dir_min_cos);
         let input = AssociationInput { terms: &terms, params: self.params, dirs };
         let ws = &mut *self.ws;
-        associate(&input, &mut ws.assoc, &mut ws.partials, &mut ws.passes, fresh, what, previous_cost)
+        associate(
+            &input,
+            (&mut ws.assoc, &mut ws.last_cube),
+            &mut ws.partials,
+            &mut ws.passes,
+            fresh,
+            what,
+            previous_cost,
+        )
     }
 
     /// Like [`Self::associate`], failing when too few associations remain.

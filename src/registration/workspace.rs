@@ -138,6 +138,8 @@ pub struct RegistrationWorkspace {
     pub(crate) assoc: Vec<Association>,
     /// The associations before the last pass, to restore when LM rejects its step.
     pub(crate) assoc_backup: Vec<Association>,
+    /// Per scene node, its last cube search (for the cache of a later fresh pass).
+    pub(crate) last_cube: Vec<Association>,
     pub(crate) partials: Vec<Partial>,
     /// Per-chunk LM systems summed alongside another sum (`evaluate::sum_with_lm`).
     pub(crate) lm_partials: Vec<Partial>,
@@ -152,6 +154,7 @@ impl RegistrationWorkspace {
         RegistrationWorkspace {
             assoc: Vec::with_capacity(scene_node_capacity),
             assoc_backup: Vec::with_capacity(scene_node_capacity),
+            last_cube: Vec::with_capacity(scene_node_capacity),
             partials: Vec::with_capacity(chunks),
             lm_partials: Vec::with_capacity(chunks),
             passes: Vec::with_capacity(MAX_PASSES),
@@ -169,6 +172,8 @@ impl RegistrationWorkspace {
         self.assoc.resize(scene_nodes, Association::NONE);
         self.assoc_backup.clear();
         self.assoc_backup.resize(scene_nodes, Association::NONE);
+        self.last_cube.clear();
+        self.last_cube.resize(scene_nodes, Association::NONE);
         let chunks = scene_nodes.div_ceil(NODE_CHUNK) + MAX_LEVELS;
         self.partials.clear();
         self.partials.resize(chunks, Partial::ZERO);
