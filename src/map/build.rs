@@ -233,6 +233,18 @@ mod tests {
     use crate::geometry::{CameraModel, PinholeIntrinsics};
     use crate::map::MapCapacity;
 
+    /// A pinhole camera of `width × height` (QVGA-like intrinsics, scaled).
+    fn camera(width: u32, height: u32) -> CameraModel {
+        let s = width as f64 / 320.0;
+        CameraModel {
+            width,
+            height,
+            intrinsics: PinholeIntrinsics { fx: 268.0 * s, fy: 270.0 * s, cx: 160.0 * s, cy: 124.0 * s },
+            distortion: crate::geometry::NO_DISTORTION,
+            depth_scale_m: 0.0002,
+        }
+    }
+
     /// A slanted wall with a colour ramp: neighbouring rows share cells.
     fn wall(camera: &CameraModel) -> (Vec<u8>, Vec<u16>) {
         let (w, h) = (camera.width as usize, camera.height as usize);
@@ -252,13 +264,7 @@ mod tests {
 
     #[test]
     fn a_region_map_depends_neither_on_earlier_frames_nor_on_the_margin_s_points() {
-        let camera = CameraModel {
-            width: 320,
-            height: 240,
-            intrinsics: PinholeIntrinsics { fx: 268.0, fy: 270.0, cx: 160.0, cy: 124.0 },
-            distortion: crate::geometry::NO_DISTORTION,
-            depth_scale_m: 0.0002,
-        };
+        let camera = camera(320, 240);
         let (rgb, depth) = wall(&camera);
         let frame = RgbdFrame::new(0, camera, &rgb, &depth).expect("consistent frame");
         let capacity = MapCapacity::for_image(320 * 240);
@@ -288,13 +294,7 @@ mod tests {
 
     #[test]
     fn finding_a_cell_near_a_node_gives_the_node_found_by_descent() {
-        let camera = CameraModel {
-            width: 160,
-            height: 120,
-            intrinsics: PinholeIntrinsics { fx: 134.0, fy: 135.0, cx: 80.0, cy: 62.0 },
-            distortion: crate::geometry::NO_DISTORTION,
-            depth_scale_m: 0.0002,
-        };
+        let camera = camera(160, 120);
         let (rgb, depth) = wall(&camera);
         let frame = RgbdFrame::new(0, camera, &rgb, &depth).expect("consistent frame");
         let capacity = MapCapacity::for_image(160 * 120);
