@@ -307,11 +307,7 @@ pub fn tracking_ms(
     // late). rayon cannot release a thread from a pool it joined: the loop gets a
     // thread of its own.
     let timed = |tracker: &mut crate::tracking::Tracker| -> Result<Vec<(f64, f64)>> {
-        let mut pool = rayon::ThreadPoolBuilder::new().use_current_thread();
-        if let Some(t) = job.threads {
-            pool = pool.num_threads(t);
-        }
-        let pool = pool.build().context("starting the thread pool")?;
+        let pool = super::dataset::thread_pool_on_this_thread(job.threads)?;
         let mut out = StepOutput::new(tracker.len());
         let mut ms = Vec::new();
         for _ in 0..job.passes {

@@ -35,7 +35,18 @@ pub fn initial_pose(dataset: &TumDataset, stamp_ns: u64, notes: &mut String) -> 
 
 /// A rayon pool with `threads` workers (all cores by default).
 pub fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
-    let mut pool = rayon::ThreadPoolBuilder::new();
+    build_pool(rayon::ThreadPoolBuilder::new(), threads)
+}
+
+/// [`thread_pool`] whose worker 0 is the calling thread: parallel work started on it
+/// begins there instead of being injected from outside (rayon allocates for that, and a
+/// pool thread woken after an idle gap may start late). The thread stays in the pool for
+/// good (rayon 1.13 cannot release it), so it can join one such pool only.
+pub fn thread_pool_on_this_thread(threads: Option<usize>) -> Result<rayon::ThreadPool> {
+    build_pool(rayon::ThreadPoolBuilder::new().use_current_thread(), threads)
+}
+
+fn build_pool(mut pool: rayon::ThreadPoolBuilder, threads: Option<usize>) -> Result<rayon::ThreadPool> {
     if let Some(t) = threads {
         pool = pool.num_threads(t);
     }

@@ -15,7 +15,7 @@ use crate::io::ipc::{self, FrameSize, Ipc, IpcError, now_ns};
 use crate::io::tracker_config::TrackerConfig;
 use crate::io::wire::{ObjectPose, RgbdFrameQvga, RgbdFrameVga, WireFrame};
 use crate::tracking::Tracker;
-use anyhow::{Context, Result};
+use anyhow::Result;
 use iceoryx2::node::Node;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
@@ -108,11 +108,7 @@ impl<F: WireFrame> LiveTracker<F> {
         // The calling thread joins the pool as worker 0, so that the parallel work it
         // starts each frame is not injected from outside (rayon allocates for that).
         // `run` must be called on this thread.
-        let mut pool = rayon::ThreadPoolBuilder::new().use_current_thread();
-        if let Some(t) = config.threads {
-            pool = pool.num_threads(t);
-        }
-        let pool = pool.build().context("starting the thread pool")?;
+        let pool = super::dataset::thread_pool_on_this_thread(config.threads)?;
         let node = ipc::node("mrsmap_tracker")?;
         let frames_name = config.frame_size.service(&config.camera_service);
         let frames = ipc::frames::<F>(&node, &frames_name)?;
