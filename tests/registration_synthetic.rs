@@ -103,3 +103,24 @@ fn a_plain_plane_does_not_constrain_the_pose() {
     println!("{r:?}");
     assert!(matches!(r, Err(RegistrationError::Degenerate { .. })), "{r:?}");
 }
+
+/// A model without contours (as fused models are) against a scene with them: the
+/// scene's contour nodes cannot match (§3.4: contours match only contours), which
+/// registration knows without searching; the motion is still recovered.
+#[test]
+fn a_model_without_contours_registers_a_scene_with_contours() {
+    let camera = vga().halved();
+    let motion = left_increment(&Vector6::new(0.01, -0.005, 0.008, 0.01, -0.006, 0.004));
+    let mesh = room(11);
+    let a = render_frame(&mesh, camera, &Pose::identity());
+    let b = render_frame(&mesh, camera, &motion);
+    let no_contours = mrsmap::map::MapParams { mark_foreground_borders: false, ..Default::default() };
+    let model = build_map_with(&a, no_contours);
+    let scene = build_map(&b);
+    assert_eq!(model.contour_levels(), 0);
+    assert_ne!(scene.contour_levels() & 1, 0, "the room's depth jumps give contours at the finest level");
+    let mut ws = RegistrationWorkspace::new(MapCapacity::for_image((camera.width * camera.height) as usize).nodes);
+    let r = register(&model, &scene, &Pose::identity(), &RegistrationParams::default(), &mut ws).expect("registers");
+    let (t, deg) = pose_error(&r.model_from_scene, &motion);
+    assert!(t < 0.005 && deg < 0.5, "error {t} m, {deg} deg");
+}

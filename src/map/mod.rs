@@ -166,6 +166,12 @@ impl SurfelMap {
         &self.tree.nodes
     }
 
+    /// Bit `l` set if some node of level `l` lies on a foreground contour (§3.4). A map
+    /// fused from many views has none: a contour is a property of one view.
+    pub fn contour_levels(&self) -> u8 {
+        self.tree.nodes.iter().filter(|n| n.border).fold(0, |bits, n| bits | 1 << n.level)
+    }
+
     /// The node range of `level`.
     pub fn level_nodes(&self, level: usize) -> std::ops::Range<usize> {
         self.tree.level_start[level] as usize..self.tree.level_end[level] as usize

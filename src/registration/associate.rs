@@ -70,6 +70,8 @@ pub(crate) struct AssociationInput<'a> {
     pub terms: &'a SumInput<'a>,
     pub params: &'a RegistrationParams,
     pub dirs: DirCandidates,
+    /// Bit `l`: the model has a contour node at level `l`.
+    pub model_contours: u8,
 }
 
 /// Associates all scene nodes (`fresh` ignores the previous matches) and sums `what`
@@ -163,6 +165,12 @@ fn associate_node(
     let previous = *a;
     if finer.covers(node) {
         *a = Association { covered: true, ..Association::NONE };
+        return;
+    }
+    if input.params.match_contours && node.border && input.model_contours & (1 << node.level) == 0 {
+        // A contour node matches only contour nodes, and the model has none at this
+        // level (a model fused from many views has none at all): no search can match.
+        *a = Association::NONE;
         return;
     }
     // At most one surfel per view direction: six fit, without initialising the storage.

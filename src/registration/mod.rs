@@ -122,7 +122,8 @@ pub fn register(
         return Err(RegistrationError::NotFinite);
     }
     ws.reset(nodes);
-    let mut solver = Solver { model, scene, params, ws, pose: *initial, lm_system: None };
+    let model_contours = model.contour_levels();
+    let mut solver = Solver { model, scene, params, ws, pose: *initial, lm_system: None, model_contours };
     let (lm_iterations, converged) = solver.levenberg_marquardt()?;
     let newton_iterations = solver.newton()?;
     let overlap = solver.overlap();
@@ -151,6 +152,8 @@ struct Solver<'a> {
     /// The LM system (Eq. 5) over the current associations at a pose, when a sum on the
     /// way computed it: the covariance at that pose (Eq. 6) needs no sweep of its own.
     lm_system: Option<(Pose, Partial)>,
+    /// Bit `l`: the model has a contour node at level `l` ([`SurfelMap::contour_levels`]).
+    model_contours: u8,
 }
 
 impl Solver<'_> {
@@ -164,7 +167,7 @@ impl Solver<'_> {
         self.lm_system = None;
         let terms = SumInput::new(self.model, self.scene, &self.pose, self.params, interpolate);
         let dirs = DirCandidates::new(&self.pose, self.params.view_dir_min_cos);
-        let input = AssociationInput { terms: &terms, params: self.params, dirs };
+        let input = AssociationInput { terms: &terms, params: self.params, dirs, model_contours: self.model_contours };
         let ws = &mut *self.ws;
         associate(
             &input,

@@ -44,9 +44,14 @@ pub fn render_frame(mesh: &Mesh, camera: CameraModel, world_from_camera: &Pose) 
 
 /// Builds a map (odometry parameters) from a rendered frame.
 pub fn build_map(target: &RenderTarget) -> SurfelMap {
+    build_map_with(target, MapParams::default())
+}
+
+/// Builds a map with `params` from a rendered frame.
+pub fn build_map_with(target: &RenderTarget, params: MapParams) -> SurfelMap {
     let cam = target.camera;
     let capacity = MapCapacity::for_image((cam.width * cam.height) as usize);
-    let mut map = SurfelMap::new(MapParams::default(), capacity).expect("default parameters are valid");
+    let mut map = SurfelMap::new(params, capacity).expect("parameters are valid");
     let mut builder = MapBuilder::new(cam.width as usize, cam.height as usize, capacity.surfels);
     let frame = RgbdFrame::new(0, cam, &target.rgb, &target.depth).expect("rendered frame is consistent");
     builder.build(&frame, &mut map).expect("map builds");
