@@ -26,8 +26,9 @@ pub(crate) fn surfel_neighborhoods(map: &mut SurfelMap) {
     });
 }
 
-/// Surfels per parallel work item (fixed, so that work splits do not depend on threads).
-pub(crate) const CHUNK: usize = 256;
+/// Surfels per parallel work item (fixed, so that work splits do not depend on threads;
+/// every item's result is per surfel, so the size changes only the balance).
+pub(crate) const CHUNK: usize = 64;
 
 /// Spatial raw moments `(n, Σp, Σppᵀ)` of one surfel, for summing over neighbourhoods.
 #[derive(Debug, Clone, Copy, Default)]

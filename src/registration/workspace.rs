@@ -5,8 +5,10 @@ use super::associate::DirCandidates;
 use crate::map::{MAX_LEVELS, NONE};
 use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
 
-/// Scene nodes per parallel work item (fixed, so sums do not depend on threads).
-pub(crate) const NODE_CHUNK: usize = 128;
+/// Scene nodes per parallel work item (fixed, so sums do not depend on threads). Small
+/// enough that the second thread gets its share of a level: a tracking scene has only
+/// ~600 nodes at level 1 (with 128, five items; the last ran alone).
+pub(crate) const NODE_CHUNK: usize = 32;
 
 /// The association of one scene node.
 #[derive(Debug, Clone, Copy, PartialEq)]
