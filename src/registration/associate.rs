@@ -16,7 +16,7 @@
 //! association and the LM system take one sweep), per level chunk in fixed slots.
 
 use super::cells::{CubeCells, axis_distance, cell_distance2, min_of};
-use super::evaluate::{Sum, SumInput, slot_offsets};
+use super::evaluate::{Sum, SumInput, slot_offsets, total};
 use super::params::RegistrationParams;
 use super::workspace::{Association, NODE_CHUNK, Partial, PassState};
 use crate::frame::rays::VIEW_AXES;
@@ -127,9 +127,7 @@ pub(crate) fn associate(
             },
         );
     }
-    let mut total = Partial::ZERO;
-    partials[..offsets[MAX_LEVELS]].iter().for_each(|s| total.add(s));
-    total.mirrored()
+    total(&partials[..offsets[MAX_LEVELS]])
 }
 
 /// The association records of the finer levels (the children of the level in work).

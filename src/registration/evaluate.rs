@@ -259,7 +259,7 @@ fn slot_associations<'a>(
 }
 
 /// The sum of partial sums, in slot order.
-fn total(partials: &[Partial]) -> Partial {
+pub(crate) fn total(partials: &[Partial]) -> Partial {
     let mut total = Partial::ZERO;
     partials.iter().for_each(|p| total.add(p));
     total.mirrored()
