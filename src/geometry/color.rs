@@ -10,13 +10,25 @@ const HALF_SQRT3: f32 = 0.866_025_4;
 /// Converts an 8-bit RGB triple to `[L, α, β]`.
 #[inline]
 pub fn rgb8_to_lab(r: u8, g: u8, b: u8) -> [f32; 3] {
-    const INV255: f32 = 1.0 / 255.0;
     // Extremes on the integers: scaling is monotonic, so the result is the same as on
     // the scaled values, without the NaN handling of `f32::max` per pixel.
-    let (max, min) = (r.max(g).max(b) as f32 * INV255, r.min(g).min(b) as f32 * INV255);
-    let (r, g, b) = (r as f32 * INV255, g as f32 * INV255, b as f32 * INV255);
+    let (max, min) = (UNIT[r.max(g).max(b) as usize], UNIT[r.min(g).min(b) as usize]);
+    let (r, g, b) = (UNIT[r as usize], UNIT[g as usize], UNIT[b as usize]);
     [0.5 * (max + min), r - 0.5 * (g + b), HALF_SQRT3 * (g - b)]
 }
+
+/// `v as f32 * (1 / 255)` for every 8-bit `v`, the same products computed once: a
+/// table read per channel instead of a conversion and a multiplication per pixel.
+static UNIT: [f32; 256] = {
+    const INV255: f32 = 1.0 / 255.0;
+    let mut t = [0.0; 256];
+    let mut v = 0;
+    while v < 256 {
+        t[v] = v as f32 * INV255;
+        v += 1;
+    }
+    t
+};
 
 /// Converts `[L, α, β]` back to 8-bit RGB for display.
 ///
@@ -48,6 +60,14 @@ mod tests {
             for (x, y) in back.iter().zip([r, g, b]) {
                 prop_assert!((*x as i32 - y as i32).abs() <= 1, "{:?} vs {:?}", back, (r, g, b));
             }
+        }
+    }
+
+    #[test]
+    fn the_table_holds_the_products_computed_at_run_time() {
+        let inv255 = std::hint::black_box(1.0f32 / 255.0);
+        for v in 0..=255u8 {
+            assert_eq!(UNIT[v as usize].to_bits(), (std::hint::black_box(v) as f32 * inv255).to_bits());
         }
     }
 

@@ -67,12 +67,27 @@ impl Aggregate {
     }
 }
 
-/// `⌊x⌋` for finite `x` within `i32` range, without a libm call (baseline x86-64 has no
-/// rounding instruction, and `f32::floor` then costs a function call per pixel).
+/// `⌊x⌋` for `|x| < 2²²` (keys are packed in 20 bits anyway, see [`pack`]), without a
+/// libm call (baseline x86-64 has no rounding instruction) and without the saturation
+/// checks of `as i32`: adding `1.5 · 2²³` rounds `x` to the nearest integer in the low
+/// bits of the sum, and the floor is one less where that rounded up. Exact in range.
 #[inline(always)]
 fn floor_i32(x: f32) -> i32 {
-    let t = x as i32;
-    if (t as f32) > x { t - 1 } else { t }
+    const MAGIC: f32 = 12_582_912.0;
+    let nearest = ((x + MAGIC).to_bits() as i32).wrapping_sub(MAGIC.to_bits() as i32);
+    nearest - i32::from(nearest as f32 > x)
+}
+
+/// The finest level a point at squared range `r2` may go to: the number of thresholds
+/// at or below `r2` (they ascend, and are infinite beyond the map's levels, so the
+/// search needs no other bound than the array's).
+#[inline(always)]
+fn level_of(r2: f32, thresholds_r2: &[f32; MAX_LEVELS]) -> usize {
+    let mut level = 0;
+    while level < MAX_LEVELS && r2 >= thresholds_r2[level] {
+        level += 1;
+    }
+    level
 }
 
 #[inline(always)]
@@ -181,6 +196,19 @@ impl Band {
 
     /// Aggregates the band's rows.
     pub(crate) fn aggregate(&mut self, input: &AggregationInput) {
+        // One copy of the pixel loop per kind of input, each without the branches (and
+        // the register pressure) of the filters it does not have.
+        match (input.gate.is_some(), input.placement.is_some()) {
+            (false, false) => self.aggregate_rows::<false, false>(input),
+            (true, false) => self.aggregate_rows::<true, false>(input),
+            (false, true) => self.aggregate_rows::<false, true>(input),
+            (true, true) => self.aggregate_rows::<true, true>(input),
+        }
+    }
+
+    /// [`Self::aggregate`] with `GATED` = `input.gate.is_some()` and `PLACED` =
+    /// `input.placement.is_some()`.
+    fn aggregate_rows<const GATED: bool, const PLACED: bool>(&mut self, input: &AggregationInput) {
         self.aggregates.clear();
         self.moments.clear();
         self.dropped_points = 0;
@@ -202,7 +230,7 @@ impl Band {
                 let cell = if d == 0 {
                     (NO_CELL, NONE)
                 } else {
-                    self.pixel(input, Pixel { depth: d, ray, flags, rgb }, u, first_row, scale)
+                    self.pixel::<GATED, PLACED>(input, Pixel { depth: d, ray, flags, rgb }, u, first_row, scale)
                 };
                 self.cur[u] = cell;
             }
@@ -230,26 +258,31 @@ impl Band {
 
     /// Aggregates one pixel with a depth reading at column `u`.
     #[inline(always)]
-    fn pixel(&mut self, input: &AggregationInput, px: Pixel, u: usize, first_row: bool, scale: f32) -> (u64, u32) {
+    fn pixel<const GATED: bool, const PLACED: bool>(
+        &mut self,
+        input: &AggregationInput,
+        px: Pixel,
+        u: usize,
+        first_row: bool,
+        scale: f32,
+    ) -> (u64, u32) {
         let Pixel { depth: d, ray, flags, rgb } = px;
         let z = d as f32 * scale;
         let r2 = z * z * ray.range2_factor;
-        let mut level = 0;
-        while level < input.num_levels && r2 >= input.level_thresholds_r2[level] {
-            level += 1;
-        }
+        let level = level_of(r2, &input.level_thresholds_r2);
         if level >= input.num_levels {
             return (NO_CELL, NONE);
         }
         let (mut x, mut y, mut z) = (ray.x * z, ray.y * z, z);
-        if let Some(gate) = input.gate
+        if GATED
+            && let Some(gate) = input.gate
             && !gate.keeps(&nalgebra::Vector3::new(x, y, z))
         {
             return (NO_CELL, NONE);
         }
         let mut dirs = if input.smooth_view_dirs { ray.near_dirs } else { 1 << ray.best_dir };
         let mut near_dirs = ray.near_dirs;
-        if let Some(pl) = &input.placement {
+        if PLACED && let Some(pl) = &input.placement {
             if flags & VIRTUAL_BORDER != 0 {
                 return (NO_CELL, NONE);
             }
@@ -278,7 +311,7 @@ impl Band {
                 return (NO_CELL, NONE);
             }
             let n = ray.range2_factor.sqrt();
-            let view_dir = match &input.placement {
+            let view_dir = match input.placement.as_ref().filter(|_| PLACED) {
                 Some(pl) => {
                     let v = pl.rotation * nalgebra::Vector3::new(ray.x / n, ray.y / n, 1.0 / n);
                     [v.x, v.y, v.z]
@@ -322,5 +355,30 @@ impl Band {
             accumulate(&mut self.moments[slot as usize], &rel);
         }
         (packed, agg)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn floor_is_exact_across_the_key_range() {
+        let special = [0.0f32, -0.0, 0.5, -0.5, 1.5, -1.5, 2.5, -2.5, 0.499_999_97, -0.499_999_97, 1e-30, -1e-30];
+        let (lo, hi) = (-(1 << 22) as f32 + 1.0, (1 << 22) as f32 - 1.0);
+        let sweep = (0..200_000).map(|i| -2000.0 + i as f32 * 0.020_001);
+        for x in special.into_iter().chain(sweep).chain([lo, hi, lo + 0.5, hi - 0.5]) {
+            assert_eq!(floor_i32(x), x.floor() as i32, "x = {x}");
+        }
+    }
+
+    #[test]
+    fn the_level_is_the_first_threshold_above_the_range() {
+        let mut t = [f32::INFINITY; MAX_LEVELS];
+        t[..4].copy_from_slice(&[0.5, 1.0, 2.0, 4.0]);
+        let stepwise = |r2: f32| (0..4).take_while(|&k| r2 >= t[k]).count();
+        for r2 in [0.0, 0.49, 0.5, 0.99, 1.0, 3.9, 4.0, 1e9, f32::NAN] {
+            assert_eq!(level_of(r2, &t), stepwise(r2), "r2 = {r2}");
+        }
     }
 }
