@@ -67,15 +67,24 @@ impl Aggregate {
     }
 }
 
-/// `⌊x⌋` for `|x| < 2²²` (keys are packed in 20 bits anyway, see [`pack`]), without a
-/// libm call (baseline x86-64 has no rounding instruction) and without the saturation
-/// checks of `as i32`: adding `1.5 · 2²³` rounds `x` to the nearest integer in the low
-/// bits of the sum, and the floor is one less where that rounded up. Exact in range.
+/// `⌊x⌋` for `|x| < 2²²`, without a libm call (baseline x86-64 has no rounding
+/// instruction) and without the saturation checks of `as i32`: adding `1.5 · 2²³` rounds
+/// `x` to the nearest integer in the low bits of the sum, and the floor is one less where
+/// that rounded up. Exact in range; camera-frame cell keys are within it by far (a point
+/// beyond the coarsest level's range, ~10 m, gets no cell).
 #[inline(always)]
-fn floor_i32(x: f32) -> i32 {
+fn floor_near(x: f32) -> i32 {
     const MAGIC: f32 = 12_582_912.0;
     let nearest = ((x + MAGIC).to_bits() as i32).wrapping_sub(MAGIC.to_bits() as i32);
     nearest - i32::from(nearest as f32 > x)
+}
+
+/// `⌊x⌋` for finite `x` within `i32` range (points placed in a map frame may lie far
+/// from its origin), without a libm call.
+#[inline(always)]
+fn floor_wide(x: f32) -> i32 {
+    let t = x as i32;
+    if (t as f32) > x { t - 1 } else { t }
 }
 
 /// The finest level a point at squared range `r2` may go to: the number of thresholds
@@ -298,7 +307,11 @@ impl Band {
             (x, y, z) = (pm.x, pm.y, pm.z);
         }
         let inv = input.inv_resolution[level];
-        let key = [floor_i32(x * inv), floor_i32(y * inv), floor_i32(z * inv)];
+        let key = if PLACED {
+            [floor_wide(x * inv), floor_wide(y * inv), floor_wide(z * inv)]
+        } else {
+            [floor_near(x * inv), floor_near(y * inv), floor_near(z * inv)]
+        };
         let packed = pack(level, key);
         let joined = self.neighbour_aggregate(u, &input.cols, first_row, packed);
         let [l, a, b] = rgb8_to_lab(rgb[0], rgb[1], rgb[2]);
@@ -368,7 +381,11 @@ mod tests {
         let (lo, hi) = (-(1 << 22) as f32 + 1.0, (1 << 22) as f32 - 1.0);
         let sweep = (0..200_000).map(|i| -2000.0 + i as f32 * 0.020_001);
         for x in special.into_iter().chain(sweep).chain([lo, hi, lo + 0.5, hi - 0.5]) {
-            assert_eq!(floor_i32(x), x.floor() as i32, "x = {x}");
+            assert_eq!(floor_near(x), x.floor() as i32, "x = {x}");
+            assert_eq!(floor_wide(x), x.floor() as i32, "x = {x}");
+        }
+        for x in [1e9f32, -1e9, 3.5e8 + 0.5] {
+            assert_eq!(floor_wide(x), x.floor() as i32, "x = {x}");
         }
     }
 
