@@ -100,16 +100,19 @@ fn scan_band(input: &ScanInput, rows: Range<usize>, flags: &mut [u8], ends: &mut
     let (width, jump2, fg) = (input.width, input.jump2, input.foreground);
     flags.fill(0);
     ends[input.cols.clone()].fill(ColumnEnds::EMPTY);
+    let cols = input.cols.clone();
     for v in rows.clone() {
         let local_row = (v - rows.start) * width;
         let mut prev: Option<(usize, f32)> = None;
-        for u in input.cols.clone() {
-            let idx = v * width + u;
-            let d = input.depth[idx];
+        // The row's depths, rays and column ends as slices, read in step (no index
+        // checks per pixel).
+        let (start, end) = (v * width + cols.start, v * width + cols.end);
+        let row = input.depth[start..end].iter().zip(&input.rays[start..end]).zip(&mut ends[cols.clone()]);
+        for (u, ((&d, ray), e)) in cols.clone().zip(row) {
             if d == 0 {
                 continue;
             }
-            let r2 = range2(d, &input.rays[idx]);
+            let r2 = range2(d, ray);
             let here = local_row + u;
             // Along the row.
             match prev {
@@ -118,7 +121,6 @@ fn scan_band(input: &ScanInput, rows: Range<usize>, flags: &mut [u8], ends: &mut
             }
             prev = Some((here, r2));
             // Along the column, within the band.
-            let e = &mut ends[u];
             if e.last == NO_PIXEL {
                 (e.first, e.first_r2) = (here as u32, r2);
             } else {
