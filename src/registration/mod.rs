@@ -239,7 +239,7 @@ impl Solver<'_> {
             let candidate = compose_left(&delta, &self.pose);
             let predicted = 0.5 * delta.dot(&(mu * delta - sys.gradient));
             let small = step_is_small(&delta, p);
-            if small && fresh {
+            if small && (fresh || !p.confirm_with_fresh_associations) {
                 // The last step: only its cost is needed, no new associations.
                 let cost = self.sum_at(&candidate, Sum::LmCost, interpolate).cost;
                 if (sys.cost - cost) / predicted > 0.0 && cost.is_finite() && is_finite(&candidate) {

@@ -53,6 +53,12 @@ pub struct RegistrationParams {
     pub step_tolerance_m: f64,
     /// … and rotates less than this (rad), with freshly searched associations.
     pub step_tolerance_rad: f64,
+    /// A small step counts as convergence only after one more pass that searches every
+    /// association afresh instead of around the previous match (the original's rule).
+    /// Without it registration takes ~20 % fewer instructions and its results are
+    /// slightly worse (docs/benchmarks.md, stop 27): a tracker, which searches afresh at
+    /// every frame anyway, may choose that.
+    pub confirm_with_fresh_associations: bool,
     /// Interpolate model surfels trilinearly in the Newton stage (§4.3).
     pub interpolate: bool,
     /// Interpolate model surfels in the LM stage as well. The original does not; without
@@ -91,6 +97,7 @@ impl Default for RegistrationParams {
             lm_tau: 1e-4,
             step_tolerance_m: 5e-4,
             step_tolerance_rad: 5e-4,
+            confirm_with_fresh_associations: true,
             interpolate: true,
             interpolate_lm: true,
             min_associations: 30,
