@@ -98,9 +98,9 @@ struct ScanInput<'a> {
 /// ends in `ends`.
 fn scan_band(input: &ScanInput, rows: Range<usize>, flags: &mut [u8], ends: &mut [ColumnEnds]) {
     let (width, jump2, fg) = (input.width, input.jump2, input.foreground);
-    flags.fill(0);
-    ends[input.cols.clone()].fill(ColumnEnds::EMPTY);
     let cols = input.cols.clone();
+    flags.fill(0);
+    ends[cols.clone()].fill(ColumnEnds::EMPTY);
     for v in rows.clone() {
         let local_row = (v - rows.start) * width;
         let mut prev: Option<(usize, f32)> = None;

@@ -51,7 +51,8 @@ pub struct RegistrationParams {
     pub lm_tau: f64,
     /// LM has converged when an accepted step moves less than this (m) …
     pub step_tolerance_m: f64,
-    /// … and rotates less than this (rad), with freshly searched associations.
+    /// … and rotates less than this (rad), with freshly searched associations (unless
+    /// `confirm_with_fresh_associations` is off).
     pub step_tolerance_rad: f64,
     /// A small step counts as convergence only after one more pass that searches every
     /// association afresh instead of around the previous match (the original's rule).
