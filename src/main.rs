@@ -2,11 +2,13 @@
 
 mod cli;
 
-use anyhow::Result;
 use clap::Parser;
 use std::process::ExitCode;
 
-fn main() -> Result<ExitCode> {
+fn main() -> ExitCode {
     let cli = cli::Cli::parse();
-    cli::run(cli.command)
+    cli::run(cli.command).unwrap_or_else(|e| {
+        eprintln!("{}", cli::report(&e));
+        ExitCode::FAILURE
+    })
 }

@@ -75,6 +75,18 @@ fn errors_exit_non_zero_and_name_the_problem() {
     ]);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("/no/such/camera.toml"));
+    // One line per cause, each said once, and no backtrace even where the user's shell
+    // asks for backtraces of panics.
+    let out = Command::new(env!("CARGO_BIN_EXE_mrsmap"))
+        .args(["track", "--config", "/no/such/tracker.toml"])
+        .env("RUST_BACKTRACE", "1")
+        .output()
+        .expect("binary runs");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.starts_with("error: cannot read tracker config /no/such/tracker.toml"), "{err}");
+    assert_eq!(err.matches("No such file").count(), 1, "{err}");
+    assert!(!err.contains("backtrace"), "{err}");
     // A frame delta of 0 is a usage error (it used to panic in the RPE's stepping).
     let gt = teddy_clip().join("groundtruth.txt");
     let out = mrsmap(&["eval", "rpe", path_str(&gt), path_str(&gt), "--delta", "0"]);

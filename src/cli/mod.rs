@@ -129,3 +129,38 @@ pub fn run(command: Command) -> Result<ExitCode> {
         Command::Bench(a) => done(commands::bench(a)),
     }
 }
+
+/// The text of a failed command for a person: `error: …`, then each cause that the
+/// messages before it do not already say (library errors name their cause in their own
+/// message, for callers that print only that). No backtrace: these are errors in the
+/// input or the environment, and the message names what was wrong; a panic still prints
+/// one under `RUST_BACKTRACE`.
+pub fn report(error: &anyhow::Error) -> String {
+    let mut text = format!("error: {error}");
+    let mut said = error.to_string();
+    for cause in error.chain().skip(1) {
+        let cause = cause.to_string();
+        if !said.contains(&cause) {
+            text.push_str(&format!("\n  caused by: {cause}"));
+        }
+        said = cause;
+    }
+    text
+}
+
+#[cfg(test)]
+mod tests {
+    use super::report;
+    use anyhow::Context;
+
+    #[test]
+    fn a_report_states_each_cause_once() {
+        let io = || Err::<(), _>(std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"));
+        // A cause already in the message above it is not repeated…
+        let e = io().context("cannot read /x.toml: no such file").unwrap_err();
+        assert_eq!(report(&e), "error: cannot read /x.toml: no such file");
+        // …one that is not, is.
+        let e = io().context("opening dataset /d").unwrap_err();
+        assert_eq!(report(&e), "error: opening dataset /d\n  caused by: no such file");
+    }
+}
