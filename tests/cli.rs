@@ -53,10 +53,18 @@ fn odometry_then_eval_end_to_end() {
     assert_eq!(csv.lines().count(), 9);
     let gt = clip.join("groundtruth.txt");
     for metric in ["rpe", "ate"] {
-        let out = mrsmap(&["eval", metric, gt.to_str().expect("utf-8"), traj.to_str().expect("utf-8")]);
+        let plot = dir.join(format!("{metric}.svg"));
+        let out = mrsmap(&["eval", metric, path_str(&gt), path_str(&traj), "--plot", path_str(&plot)]);
         assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
         let text = String::from_utf8_lossy(&out.stdout);
         assert!(text.contains("median") && text.contains("rmse"), "{text}");
+        // The picture: one SVG document, its errors in mm with the median printed above.
+        let svg = std::fs::read_to_string(&plot).expect("plot written");
+        let median_mm = text.lines().find_map(|l| l.trim().strip_prefix("median")).expect("median line");
+        let median_mm: f64 = median_mm.trim().trim_end_matches("mm").trim().parse().expect("number");
+        assert!(svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"));
+        assert!(svg.contains(&format!("median {median_mm:.2}")), "{metric}: median {median_mm} not in the plot");
+        assert!(!svg.contains("NaN"));
     }
 }
 
@@ -92,6 +100,25 @@ fn errors_exit_non_zero_and_name_the_problem() {
     let out = mrsmap(&["eval", "rpe", path_str(&gt), path_str(&gt), "--delta", "0"]);
     assert_eq!(out.status.code(), Some(2), "{}", String::from_utf8_lossy(&out.stderr));
     assert!(String::from_utf8_lossy(&out.stderr).contains("--delta"));
+}
+
+#[test]
+fn a_report_into_a_closed_pipe_ends_quietly() {
+    // `mrsmap eval … | head -0`: the reader is gone before the first line. The process is
+    // ended by SIGPIPE as a Unix tool is, without a panic message.
+    use std::os::unix::process::ExitStatusExt;
+    let gt = teddy_clip().join("groundtruth.txt");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_mrsmap"))
+        .args(["eval", "rpe", path_str(&gt), path_str(&gt)])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("binary runs");
+    drop(child.stdout.take());
+    let out = child.wait_with_output().expect("waits");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(out.status.signal() == Some(13) || out.status.success(), "{:?}: {err}", out.status);
 }
 
 #[test]

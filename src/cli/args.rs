@@ -227,6 +227,10 @@ pub enum EvalCommand {
         delta: u64,
         #[command(flatten)]
         association: AssociationArgs,
+        /// Also draw the error of every frame pair over time into this SVG file (median
+        /// and RMSE marked, the largest labelled with its time).
+        #[arg(long)]
+        plot: Option<PathBuf>,
     },
     /// Absolute trajectory error after rigid (Horn) alignment.
     Ate {
@@ -236,6 +240,11 @@ pub enum EvalCommand {
         est: PathBuf,
         #[command(flatten)]
         association: AssociationArgs,
+        /// Also draw both trajectories seen from above (the aligned estimate over the
+        /// reference, each position joined to its reference) and the error over time
+        /// into this SVG file.
+        #[arg(long)]
+        plot: Option<PathBuf>,
     },
 }
 

@@ -1,11 +1,10 @@
 //! What each subcommand does: build the job from the arguments, run it, print.
 
 use super::args::*;
-use anyhow::Result;
+use anyhow::{Context, Result};
 use mrsmap::app;
 use mrsmap::app::interrupt::{INTERRUPTED_EXIT, Interrupted, Stop};
-use mrsmap::eval::{ErrorStats, associate, ate_translation, rpe_translation};
-use mrsmap::geometry::Pose;
+use mrsmap::eval::{Associated, ErrorStats, aligned_positions, associate_stamped, ate_translation, rpe_translation};
 use mrsmap::io::tum::Trajectory;
 use std::path::Path;
 use std::process::ExitCode;
@@ -208,28 +207,52 @@ pub fn eval(command: EvalCommand) -> Result<()> {
             let trials = app::quality_eval::run(&config, &job)?;
             app::quality_eval::print(&job, &trials, config.params.min_quality);
         }
-        EvalCommand::Rpe { gt, est, delta, association } => {
-            let (r, p) = read_associated(&gt, &est, &association)?;
-            let errors = rpe_translation(&r, &p, usize::try_from(delta)?)?;
-            print_stats(&format!("RPE translation, delta {delta} frame(s)"), &ErrorStats::of(&errors));
+        EvalCommand::Rpe { gt, est, delta, association, plot } => {
+            let pairs = read_associated(&gt, &est, &association)?;
+            let delta = usize::try_from(delta)?;
+            let errors = rpe_translation(&pairs.reference, &pairs.estimate, delta)?;
+            let title = format!("RPE translation, delta {delta} frame(s)");
+            print_stats(&title, &ErrorStats::of(&errors));
+            if let Some(path) = plot {
+                let stamps: Vec<f64> = pairs.stamps.iter().step_by(delta).copied().take(errors.len()).collect();
+                let svg = app::plot::rpe_svg(&plot_title(&title, &est, &gt), &stamps, &errors);
+                write_plot(&path, &svg)?;
+            }
         }
-        EvalCommand::Ate { gt, est, association } => {
-            let (r, p) = read_associated(&gt, &est, &association)?;
-            let errors = ate_translation(&r, &p)?;
-            print_stats("ATE translation after rigid alignment", &ErrorStats::of(&errors));
+        EvalCommand::Ate { gt, est, association, plot } => {
+            let pairs = read_associated(&gt, &est, &association)?;
+            let aligned = aligned_positions(&pairs.reference, &pairs.estimate)?;
+            let errors = ate_translation(&pairs.reference, &pairs.estimate)?;
+            let title = "ATE translation after rigid alignment";
+            print_stats(title, &ErrorStats::of(&errors));
+            if let Some(path) = plot {
+                let reference: Vec<_> = pairs.reference.iter().map(|p| p.translation.vector).collect();
+                let svg = app::plot::ate_svg(&plot_title(title, &est, &gt), &pairs.stamps, &reference, &aligned);
+                write_plot(&path, &svg)?;
+            }
         }
     }
     Ok(())
 }
 
+fn plot_title(metric: &str, est: &Path, gt: &Path) -> String {
+    format!("{metric}\n{} against {}", est.display(), gt.display())
+}
+
+fn write_plot(path: &Path, svg: &str) -> Result<()> {
+    std::fs::write(path, svg).with_context(|| format!("writing the plot {}", path.display()))?;
+    println!("plot: {}", path.display());
+    Ok(())
+}
+
 /// The reference's and the estimate's poses paired by stamp, the estimate's stamps
 /// shifted by `--offset` first.
-fn read_associated(gt: &Path, est: &Path, a: &AssociationArgs) -> Result<(Vec<Pose>, Vec<Pose>)> {
+fn read_associated(gt: &Path, est: &Path, a: &AssociationArgs) -> Result<Associated> {
     anyhow::ensure!(a.offset.is_finite(), "--offset must be a finite number of seconds, not {}", a.offset);
     let reference = Trajectory::read(gt)?;
     let mut estimate = Trajectory::read(est)?;
     estimate.stamps.iter_mut().for_each(|t| *t += a.offset);
-    Ok(associate(&reference, &estimate, a.max_diff)?)
+    Ok(associate_stamped(&reference, &estimate, a.max_diff)?)
 }
 
 /// `mrsmap bench`.

@@ -111,6 +111,20 @@ pub enum Command {
     Bench(BenchArgs),
 }
 
+impl Command {
+    /// Whether the command's job is output that may go into a pipe (a table, a report,
+    /// poses): killed by SIGPIPE when the reader goes away, as Unix tools are. Not the
+    /// processes that talk over iceoryx2 and must outlive their stdout (the live
+    /// tracker, the camera driver, the demo that runs both).
+    pub fn prints_for_a_pipe(&self) -> bool {
+        match self {
+            Command::Track(a) => a.dataset.is_some(),
+            Command::Camera(_) | Command::Demo(_) => false,
+            _ => true,
+        }
+    }
+}
+
 /// Runs a subcommand; its exit status (130: stopped early by Ctrl-C or SIGTERM, the
 /// outputs written for the frames before).
 pub fn run(command: Command) -> Result<ExitCode> {

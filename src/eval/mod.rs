@@ -120,6 +120,26 @@ pub fn associate(
     estimate: &Trajectory,
     max_diff: f64,
 ) -> Result<(Vec<Pose>, Vec<Pose>), EvalError> {
+    associate_stamped(reference, estimate, max_diff).map(|a| (a.reference, a.estimate))
+}
+
+/// Poses of two trajectories paired by stamp ([`associate`]), with the reference's stamps.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Associated {
+    /// The reference's stamp of each pair (s).
+    pub stamps: Vec<f64>,
+    /// Reference poses.
+    pub reference: Vec<Pose>,
+    /// Estimated poses.
+    pub estimate: Vec<Pose>,
+}
+
+/// [`associate`], keeping the reference's stamp of each pair.
+pub fn associate_stamped(
+    reference: &Trajectory,
+    estimate: &Trajectory,
+    max_diff: f64,
+) -> Result<Associated, EvalError> {
     let est_longer = estimate.stamps.len() > reference.stamps.len();
     let pairs: Vec<(usize, usize)> = if est_longer {
         matching_time_indices(&reference.stamps, &estimate.stamps, max_diff)
@@ -129,7 +149,11 @@ pub fn associate(
     if pairs.is_empty() {
         return Err(EvalError::NoOverlap { max_diff, est: estimate.stamps.len(), gt: reference.stamps.len() });
     }
-    Ok(pairs.iter().map(|&(r, e)| (reference.poses[r], estimate.poses[e])).unzip())
+    Ok(Associated {
+        stamps: pairs.iter().map(|&(r, _)| reference.stamps[r]).collect(),
+        reference: pairs.iter().map(|&(r, _)| reference.poses[r]).collect(),
+        estimate: pairs.iter().map(|&(_, e)| estimate.poses[e]).collect(),
+    })
 }
 
 /// Translational relative pose errors (m) at a delta of `delta` frames.
@@ -190,13 +214,20 @@ pub fn align_poses(estimate: &[Pose], reference: &[Pose], lever_m: f64) -> Pose 
 
 /// Absolute trajectory errors (m) of the positions after rigid alignment.
 pub fn ate_translation(reference: &[Pose], estimate: &[Pose]) -> Result<Vec<f64>, EvalError> {
+    let aligned = aligned_positions(reference, estimate)?;
+    Ok(aligned.iter().zip(reference).map(|(a, q)| (q.translation.vector - a).norm()).collect())
+}
+
+/// The estimate's positions after the rigid alignment of the ATE, in the reference's
+/// frame.
+pub fn aligned_positions(reference: &[Pose], estimate: &[Pose]) -> Result<Vec<Vector3<f64>>, EvalError> {
     if reference.len() < 3 {
         return Err(EvalError::TooFew { found: reference.len(), needed: 3 });
     }
     let x: Vec<Vector3<f64>> = estimate.iter().map(|p| p.translation.vector).collect();
     let y: Vec<Vector3<f64>> = reference.iter().map(|p| p.translation.vector).collect();
     let (r, t) = align_rigid(&x, &y);
-    Ok(x.iter().zip(&y).map(|(a, b)| (b - (r * a + t)).norm()).collect())
+    Ok(x.iter().map(|a| r * a + t).collect())
 }
 
 #[cfg(test)]
