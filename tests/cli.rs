@@ -95,6 +95,14 @@ fn errors_exit_non_zero_and_name_the_problem() {
     assert!(err.starts_with("error: cannot read tracker config /no/such/tracker.toml"), "{err}");
     assert_eq!(err.matches("No such file").count(), 1, "{err}");
     assert!(!err.contains("backtrace"), "{err}");
+    // The demo's default paths are relative to the repository: elsewhere it says so.
+    let out = Command::new(env!("CARGO_BIN_EXE_mrsmap"))
+        .arg("demo")
+        .current_dir(std::env::temp_dir())
+        .output()
+        .expect("binary runs");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("repository's root folder") && err.contains("--config"), "{err}");
     // A frame delta of 0 is a usage error (it used to panic in the RPE's stepping).
     let gt = teddy_clip().join("groundtruth.txt");
     let out = mrsmap(&["eval", "rpe", path_str(&gt), path_str(&gt), "--delta", "0"]);

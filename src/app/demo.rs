@@ -40,6 +40,15 @@ impl Drop for Guard {
 
 /// Runs the demo; prints as it goes.
 pub fn run(job: &DemoJob) -> Result<()> {
+    for (path, option) in [(&job.config, "--config"), (&job.dataset, "--dataset"), (&job.camera, "--camera")] {
+        if !path.exists() {
+            bail!(
+                "{} not found: run `mrsmap demo` from the repository's root folder (its default paths \
+                 are relative to it), or give {option}",
+                path.display()
+            );
+        }
+    }
     let config = read_tracker_config(&job.config)?;
     let dataset = TumDataset::open(&job.dataset).with_context(|| format!("opening {}", job.dataset.display()))?;
     let frames = dataset.frames.len();
