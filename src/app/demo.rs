@@ -38,8 +38,8 @@ impl Drop for Guard {
     }
 }
 
-/// Runs the demo; prints as it goes.
-pub fn run(job: &DemoJob) -> Result<()> {
+/// The demo's inputs exist; its defaults are relative to the repository's root.
+fn check_paths(job: &DemoJob) -> Result<()> {
     for (path, option) in [(&job.config, "--config"), (&job.dataset, "--dataset"), (&job.camera, "--camera")] {
         if !path.exists() {
             bail!(
@@ -49,6 +49,12 @@ pub fn run(job: &DemoJob) -> Result<()> {
             );
         }
     }
+    Ok(())
+}
+
+/// Runs the demo; prints as it goes.
+pub fn run(job: &DemoJob) -> Result<()> {
+    check_paths(job)?;
     let config = read_tracker_config(&job.config)?;
     let dataset = TumDataset::open(&job.dataset).with_context(|| format!("opening {}", job.dataset.display()))?;
     let frames = dataset.frames.len();
