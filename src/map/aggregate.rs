@@ -15,7 +15,7 @@
 //! `f32`, which is exact enough because `p − r` is at most a cell across.
 
 use super::params::MAX_LEVELS;
-use super::region::PixelGate;
+use super::region::{PixelGate, RowSpans};
 use super::stats::{PACKED6, SurfelStats};
 use crate::frame::{PixelRay, RgbdFrame};
 use crate::geometry::color::rgb8_to_lab;
@@ -142,6 +142,8 @@ pub(crate) struct AggregationInput<'a> {
     pub cols: std::ops::Range<usize>,
     /// Tracking: only the points this gate keeps enter (paper §5.2).
     pub gate: Option<&'a PixelGate>,
+    /// With a gate: per row, the columns whose rays can meet it (the others are skipped).
+    pub spans: Option<&'a RowSpans>,
 }
 
 /// Packs level and key into one comparable word (`u64::MAX` = no cell).
@@ -228,14 +230,22 @@ impl Band {
         let cols = input.cols.clone();
         for v in self.rows.clone() {
             let first_row = v == self.rows.start;
+            // With a gate, only the columns whose rays can meet it: the others give no
+            // point, as the gate would have rejected theirs.
+            let span = match input.spans.filter(|_| GATED) {
+                Some(spans) => spans.columns(v, &cols),
+                None => cols.clone(),
+            };
+            self.cur[cols.start..span.start].fill((NO_CELL, NONE));
+            self.cur[span.end..cols.end].fill((NO_CELL, NONE));
             // The row's pixels as slices, read in step (no index checks per pixel).
-            let (start, end) = (v * width + cols.start, v * width + cols.end);
+            let (start, end) = (v * width + span.start, v * width + span.end);
             let pixels = frame.depth[start..end]
                 .iter()
                 .zip(&input.rays[start..end])
                 .zip(&input.flags[start..end])
                 .zip(frame.rgb[3 * start..3 * end].chunks_exact(3));
-            for (u, (((&d, ray), &flags), rgb)) in cols.clone().zip(pixels) {
+            for (u, (((&d, ray), &flags), rgb)) in span.clone().zip(pixels) {
                 let cell = if d == 0 {
                     (NO_CELL, NONE)
                 } else {

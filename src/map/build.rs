@@ -196,6 +196,7 @@ impl MapBuilder {
             placement,
             cols: point_cols,
             gate: region.gate.as_ref(),
+            spans: region.spans.as_ref().filter(|_| region.gate.is_some()),
         };
         self.bands[..self.active_bands].par_iter_mut().for_each(|b| b.aggregate(&input));
         Ok(())
@@ -259,7 +260,7 @@ mod tests {
         point_rows: Range<usize>,
         point_cols: Range<usize>,
     ) -> ImageRegion {
-        ImageRegion { rows, cols, point_rows, point_cols, gate: None }
+        ImageRegion { rows, cols, point_rows, point_cols, gate: None, spans: None }
     }
 
     #[test]

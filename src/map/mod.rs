@@ -24,7 +24,7 @@ pub mod tree;
 pub use build::{BuildReport, MapBuilder, MapError, PlacedFrame};
 pub use descriptor::{DESCRIPTOR_LEN, Descriptor, descriptor_distance2};
 pub use params::{MAX_LEVELS, MapCapacity, MapParams, MapParamsError};
-pub use region::{GateVolume, ImageRegion, MAX_GATE_CORNERS, PixelGate, PolygonEdge};
+pub use region::{GateVolume, ImageRegion, MAX_GATE_CORNERS, PixelGate, PolygonEdge, RayEllipsoid, RowSpans};
 pub use restore::{MapParts, RestoreError};
 pub use stats::SurfelStats;
 pub use tree::{NONE, Node, NodeArena, SELF_NEIGHBOR, neighbor_index};

@@ -3,7 +3,7 @@
 
 use super::params::TrackerParams;
 use crate::geometry::{CameraModel, Pose};
-use crate::map::{GateVolume, ImageRegion, MAX_GATE_CORNERS, PixelGate};
+use crate::map::{GateVolume, ImageRegion, MAX_GATE_CORNERS, PixelGate, RayEllipsoid, RowSpans};
 use crate::slam::VolumeShape;
 use nalgebra::{Matrix3, Point3, Vector3};
 use thiserror::Error;
@@ -193,13 +193,48 @@ impl ModelExtent {
         // the gate's box and ellipsoid); the margin serves border detection. With lens
         // distortion the bounds come from samples of a curved outline: every pixel of
         // the region may give points.
-        let (point_rows, point_cols) = if camera.is_distorted() {
-            (rows.clone(), cols.clone())
+        let (point_rows, point_cols, spans) = if camera.is_distorted() {
+            (rows.clone(), cols.clone(), None)
         } else {
             let s = POINT_BOUNDS_SLACK_PX.min(m.max(0.0));
-            (span(v_min, v_max, s, h), span(u_min, u_max, s, w))
+            let spans = self.row_spans(&camera_from_object, camera, (&lo, &hi), params.gate_mahalanobis2);
+            (span(v_min, v_max, s, h), span(u_min, u_max, s, w), spans)
         };
-        ImageRegion { rows, cols, point_rows, point_cols, gate: Some(gate) }
+        ImageRegion { rows, cols, point_rows, point_cols, gate: Some(gate), spans }
+    }
+
+    /// Per row, the columns whose pinhole rays can meet the gate: those that meet its box
+    /// and its ellipsoid, each taken a little larger than the gate's (the box by a
+    /// millimetre, the ellipsoid's χ² by 1 %: far beyond the single-precision rounding
+    /// of the gate's tests, so every point the gate keeps lies on such a ray). `None` if
+    /// the box reaches behind the camera.
+    fn row_spans(
+        &self,
+        camera_from_object: &Pose,
+        camera: &CameraModel,
+        (lo, hi): (&Vector3<f64>, &Vector3<f64>),
+        max_mahalanobis2: f64,
+    ) -> Option<RowSpans> {
+        const BOX_GROWTH_M: f64 = 1e-3;
+        const CHI2_GROWTH: f64 = 1.01;
+        let k = &camera.intrinsics;
+        let (lo, hi) = (lo.add_scalar(-BOX_GROWTH_M), hi.add_scalar(BOX_GROWTH_M));
+        let mut corners_px = [[0.0; 2]; 8];
+        for (corner, px) in corners_px.iter_mut().enumerate() {
+            let p = Point3::from(Vector3::from_fn(|i, _| if corner & (1 << i) == 0 { lo[i] } else { hi[i] }));
+            let c = camera_from_object * p;
+            if c.z < 0.05 {
+                return None;
+            }
+            *px = [k.fx * c.x / c.z + k.cx, k.fy * c.y / c.z + k.cy];
+        }
+        let r = camera_from_object.rotation.to_rotation_matrix().into_inner();
+        let centre = (camera_from_object * Point3::from(self.mean)).coords;
+        let a = r * self.inverse_covariance * r.transpose() / (max_mahalanobis2 * CHI2_GROWTH);
+        let ac = a * centre;
+        let kappa = centre.dot(&ac) - 1.0;
+        let ellipsoid = (kappa > 0.0).then_some(RayEllipsoid { a, ac, kappa });
+        Some(RowSpans { intrinsics: [k.fx, k.fy, k.cx, k.cy], corners_px, ellipsoid })
     }
 }
 
@@ -354,6 +389,57 @@ mod tests {
         let folding = CameraModel { distortion: [-1.5, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], ..camera() };
         let r = e.region(&object_from_camera, &folding, &params);
         assert_eq!((r.rows, r.cols), (0..480, 0..640));
+    }
+
+    #[test]
+    fn the_row_spans_hold_every_pixel_whose_ray_the_gate_keeps_a_point_of() {
+        // A tilted, elongated distribution alone (the ellipse decides the spans), a box
+        // alone (a distribution too wide to matter: the box's image decides), and the
+        // distribution cut by a prism, each seen from an oblique camera.
+        let l = Matrix3::new(0.05, 0.0, 0.0, 0.02, 0.03, 0.0, -0.01, 0.015, 0.02);
+        let prism = VolumeShape::Prism {
+            polygon: vec![[-0.12, -0.1], [0.15, -0.08], [0.1, 0.12], [-0.1, 0.09]],
+            min_z: 0.01,
+            max_z: 0.25,
+        };
+        let cube = VolumeShape::Box { half_extents: [0.08, 0.12, 0.1] };
+        let wide = (Vector3::repeat(-1.0), Vector3::repeat(1.0));
+        let mean = Vector3::new(0.0, 0.0, 0.1);
+        let extents = [
+            ModelExtent::new(mean, l * l.transpose(), None, wide),
+            ModelExtent::new(Vector3::zeros(), Matrix3::identity() * 100.0, Some(&cube), wide),
+            ModelExtent::new(mean, l * l.transpose(), Some(&prism), wide),
+        ];
+        let camera_from_object =
+            Pose::from_parts(Translation3::new(0.05, 0.02, 0.8), UnitQuaternion::from_euler_angles(2.1, -0.3, 0.6));
+        let k = camera().intrinsics;
+        for e in extents {
+            let e = e.expect("extent");
+            let region = e.region(&camera_from_object.inverse(), &camera(), &TrackerParams::default());
+            let (gate, spans) = (region.gate.as_ref().expect("gate"), region.spans.as_ref().expect("pinhole: spans"));
+            let (mut kept_pixels, mut skipped, mut closest) = (0, 0, usize::MAX);
+            for v in region.point_rows.clone() {
+                let span = spans.columns(v, &region.point_cols);
+                for u in region.point_cols.clone() {
+                    // The pixel's ray and points as the ray table and the aggregation make them.
+                    let (x, y) = (((u as f64 - k.cx) / k.fx) as f32, ((v as f64 - k.cy) / k.fy) as f32);
+                    let kept =
+                        (0..1200).map(|i| 0.4 + 0.001 * i as f32).any(|z| gate.keeps(&Vector3::new(x * z, y * z, z)));
+                    kept_pixels += usize::from(kept);
+                    assert!(!kept || span.contains(&u), "pixel ({u}, {v}) gives kept points outside {span:?}");
+                    skipped += usize::from(!span.contains(&u));
+                    if kept {
+                        closest = closest.min((u - span.start).min(span.end - 1 - u));
+                    }
+                }
+            }
+            let area = region.point_rows.len() * region.point_cols.len();
+            assert!(kept_pixels > 2000, "{kept_pixels} pixels with kept points");
+            assert!(skipped > area / 10, "the spans skip part of the rectangle: {skipped} of {area}");
+            // Tight: kept pixels come within a few columns of the spans' ends (the slack
+            // and the growth of the shapes), so narrower spans would lose some.
+            assert!(closest <= 4, "kept pixels come within {closest} columns of the spans' ends");
+        }
     }
 
     #[test]
