@@ -221,11 +221,11 @@ pub fn eval(command: EvalCommand) -> Result<()> {
         }
         EvalCommand::Ate { gt, est, association, plot } => {
             let pairs = read_associated(&gt, &est, &association)?;
-            let aligned = aligned_positions(&pairs.reference, &pairs.estimate)?;
             let errors = ate_translation(&pairs.reference, &pairs.estimate)?;
             let title = "ATE translation after rigid alignment";
             print_stats(title, &ErrorStats::of(&errors));
             if let Some(path) = plot {
+                let aligned = aligned_positions(&pairs.reference, &pairs.estimate)?;
                 let reference: Vec<_> = pairs.reference.iter().map(|p| p.translation.vector).collect();
                 let svg = app::plot::ate_svg(&plot_title(title, &est, &gt), &pairs.stamps, &reference, &aligned);
                 write_plot(&path, &svg)?;

@@ -196,7 +196,7 @@ impl MapBuilder {
             placement,
             cols: point_cols,
             gate: region.gate.as_ref(),
-            spans: region.spans.as_ref().filter(|_| region.gate.is_some()),
+            spans: region.spans.as_ref(),
         };
         self.bands[..self.active_bands].par_iter_mut().for_each(|b| b.aggregate(&input));
         Ok(())
