@@ -227,7 +227,8 @@ pub fn eval(command: EvalCommand) -> Result<()> {
             if let Some(path) = plot {
                 let aligned = aligned_positions(&pairs.reference, &pairs.estimate)?;
                 let reference: Vec<_> = pairs.reference.iter().map(|p| p.translation.vector).collect();
-                let svg = app::plot::ate_svg(&plot_title(title, &est, &gt), &pairs.stamps, &reference, &aligned);
+                let svg =
+                    app::plot::ate_svg(&plot_title(title, &est, &gt), &pairs.stamps, (&reference, &aligned), &errors);
                 write_plot(&path, &svg)?;
             }
         }

@@ -155,20 +155,12 @@ impl ModelExtent {
         let gate = self.gate(object_from_camera, params.gate_mahalanobis2);
         let (lo, hi) = self.gate_box(params.gate_mahalanobis2);
         let camera_from_object = object_from_camera.inverse();
-        let k = &camera.intrinsics;
+        let Some(corners) = box_corners_px(&camera_from_object, camera, (&lo, &hi)) else {
+            return ImageRegion { gate: Some(gate), ..ImageRegion::whole(w, h) };
+        };
         let (mut u_min, mut u_max, mut v_min, mut v_max) =
             (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
-        for corner in 0..8 {
-            let p = Point3::new(
-                if corner & 1 == 0 { lo.x } else { hi.x },
-                if corner & 2 == 0 { lo.y } else { hi.y },
-                if corner & 4 == 0 { lo.z } else { hi.z },
-            );
-            let c = camera_from_object * p;
-            if c.z < 0.05 {
-                return ImageRegion { gate: Some(gate), ..ImageRegion::whole(w, h) };
-            }
-            let (u, v) = (k.fx * c.x / c.z + k.cx, k.fy * c.y / c.z + k.cy);
+        for [u, v] in corners {
             (u_min, u_max, v_min, v_max) = (u_min.min(u), u_max.max(u), v_min.min(v), v_max.max(v));
         }
         // The gate keeps only points inside its ellipsoid: the tangent planes through the
@@ -219,15 +211,7 @@ impl ModelExtent {
         const CHI2_GROWTH: f64 = 1.01;
         let k = &camera.intrinsics;
         let (lo, hi) = (lo.add_scalar(-BOX_GROWTH_M), hi.add_scalar(BOX_GROWTH_M));
-        let mut corners_px = [[0.0; 2]; 8];
-        for (corner, px) in corners_px.iter_mut().enumerate() {
-            let p = Point3::from(Vector3::from_fn(|i, _| if corner & (1 << i) == 0 { lo[i] } else { hi[i] }));
-            let c = camera_from_object * p;
-            if c.z < 0.05 {
-                return None;
-            }
-            *px = [k.fx * c.x / c.z + k.cx, k.fy * c.y / c.z + k.cy];
-        }
+        let corners_px = box_corners_px(camera_from_object, camera, (&lo, &hi))?;
         let r = camera_from_object.rotation.to_rotation_matrix().into_inner();
         let centre = (camera_from_object * Point3::from(self.mean)).coords;
         let a = r * self.inverse_covariance * r.transpose() / (max_mahalanobis2 * CHI2_GROWTH);
@@ -236,6 +220,27 @@ impl ModelExtent {
         let ellipsoid = (kappa > 0.0).then_some(RayEllipsoid { a, ac, kappa });
         Some(RowSpans { intrinsics: [k.fx, k.fy, k.cx, k.cy], corners_px, ellipsoid })
     }
+}
+
+/// The pinhole images (pixels) of the corners of the box `lo ..= hi` (object frame),
+/// corner `k` taking `hi` on axis `i` where bit `i` of `k` is set; `None` if a corner
+/// lies behind the camera or within 5 cm of its plane.
+fn box_corners_px(
+    camera_from_object: &Pose,
+    camera: &CameraModel,
+    (lo, hi): (&Vector3<f64>, &Vector3<f64>),
+) -> Option<[[f64; 2]; 8]> {
+    let k = &camera.intrinsics;
+    let mut corners = [[0.0; 2]; 8];
+    for (corner, px) in corners.iter_mut().enumerate() {
+        let p = Point3::from(Vector3::from_fn(|i, _| if corner & (1 << i) == 0 { lo[i] } else { hi[i] }));
+        let c = camera_from_object * p;
+        if c.z < 0.05 {
+            return None;
+        }
+        *px = [k.fx * c.x / c.z + k.cx, k.fy * c.y / c.z + k.cy];
+    }
+    Some(corners)
 }
 
 /// Samples per side of the pinhole rectangle mapped through the lens.
