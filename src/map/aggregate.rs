@@ -14,6 +14,7 @@
 //! `p = (x, y, z, L, α, β)` about its first point `r`: 28 sums of `upper(v vᵀ)`, in
 //! `f32`, which is exact enough because `p − r` is at most a cell across.
 
+use super::gate_cells::CellGate;
 use super::params::MAX_LEVELS;
 use super::region::{PixelGate, RowSpans};
 use super::stats::{PACKED6, SurfelStats};
@@ -157,6 +158,15 @@ fn pack(level: usize, key: [i32; 3]) -> u64 {
 
 const NO_CELL: u64 = u64::MAX;
 
+/// Entries of a band's table of the cells the gate has decided (direct-mapped by cell).
+const GATE_CELL_SLOTS: usize = 1024;
+
+/// The slot of cell `packed` in the table of decided cells.
+#[inline(always)]
+fn gate_cell_slot(packed: u64) -> usize {
+    (packed.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 54) as usize % GATE_CELL_SLOTS
+}
+
 /// What the aggregation reads of one pixel.
 struct Pixel<'a> {
     depth: u16,
@@ -175,6 +185,9 @@ pub(crate) struct Band {
     pub dropped_points: u32,
     prev: Vec<(u64, u32)>,
     cur: Vec<(u64, u32)>,
+    /// With a gate: what it does with each cell met so far in this frame (by cell key;
+    /// a cell's entry may be overwritten by another's and is then decided again).
+    gate_cells: Vec<(u64, CellGate)>,
     aggregate_capacity: usize,
     moments_capacity: usize,
 }
@@ -192,6 +205,7 @@ impl Band {
             dropped_points: 0,
             prev: vec![(NO_CELL, NONE); width],
             cur: vec![(NO_CELL, NONE); width],
+            gate_cells: vec![(NO_CELL, CellGate::Straddles); GATE_CELL_SLOTS],
             aggregate_capacity,
             moments_capacity,
         }
@@ -227,6 +241,10 @@ impl Band {
         let width = frame.width();
         let scale = frame.camera.depth_scale_m as f32;
         self.prev.iter_mut().for_each(|c| *c = (NO_CELL, NONE));
+        if GATED {
+            // The gate is this frame's.
+            self.gate_cells.fill((NO_CELL, CellGate::Straddles));
+        }
         let cols = input.cols.clone();
         for v in self.rows.clone() {
             let first_row = v == self.rows.start;
@@ -275,6 +293,32 @@ impl Band {
         }
     }
 
+    /// Whether the gate keeps the camera-frame point `p` of cell `key` (`packed` with its
+    /// level; `inv` = 1 / the cell size): decided for the point's whole cell where the gate was prepared for cells and does not cut it
+    /// (`GateCells`), else by testing the point. (A placed frame's cells are in another
+    /// frame than the gate's points: there every point is tested.)
+    #[inline(always)]
+    fn gate_keeps<const PLACED: bool>(
+        &mut self,
+        gate: &PixelGate,
+        p: [f32; 3],
+        key: [i32; 3],
+        packed: u64,
+        inv: f32,
+    ) -> bool {
+        let point = nalgebra::Vector3::from(p);
+        let Some(cells) = gate.cells.as_ref().filter(|_| !PLACED) else { return gate.keeps(&point) };
+        let entry = &mut self.gate_cells[gate_cell_slot(packed)];
+        if entry.0 != packed {
+            *entry = (packed, cells.classify(key, inv));
+        }
+        match entry.1 {
+            CellGate::Inside => true,
+            CellGate::Outside => false,
+            CellGate::Straddles => gate.keeps(&point),
+        }
+    }
+
     /// Aggregates one pixel with a depth reading at column `u`.
     #[inline(always)]
     fn pixel<const GATED: bool, const PLACED: bool>(
@@ -293,9 +337,13 @@ impl Band {
             return (NO_CELL, NONE);
         }
         let (mut x, mut y, mut z) = (ray.x * z, ray.y * z, z);
+        let inv = input.inv_resolution[level];
+        // The point's cell in the camera frame (a placed point's is found below).
+        let camera_key = [floor_near(x * inv), floor_near(y * inv), floor_near(z * inv)];
+        let camera_packed = pack(level, camera_key);
         if GATED
             && let Some(gate) = input.gate
-            && !gate.keeps(&nalgebra::Vector3::new(x, y, z))
+            && !self.gate_keeps::<PLACED>(gate, [x, y, z], camera_key, camera_packed, inv)
         {
             return (NO_CELL, NONE);
         }
@@ -316,13 +364,12 @@ impl Band {
             near_dirs = near;
             (x, y, z) = (pm.x, pm.y, pm.z);
         }
-        let inv = input.inv_resolution[level];
-        let key = if PLACED {
-            [floor_wide(x * inv), floor_wide(y * inv), floor_wide(z * inv)]
+        let (key, packed) = if PLACED {
+            let key = [floor_wide(x * inv), floor_wide(y * inv), floor_wide(z * inv)];
+            (key, pack(level, key))
         } else {
-            [floor_near(x * inv), floor_near(y * inv), floor_near(z * inv)]
+            (camera_key, camera_packed)
         };
-        let packed = pack(level, key);
         let joined = self.neighbour_aggregate(u, &input.cols, first_row, packed);
         let [l, a, b] = rgb8_to_lab(rgb[0], rgb[1], rgb[2]);
         let point = [x, y, z, l, a, b];

@@ -15,6 +15,7 @@ mod border;
 mod build;
 mod descriptor;
 mod evaluate;
+pub mod gate_cells;
 pub mod params;
 pub mod region;
 mod restore;
@@ -23,6 +24,7 @@ pub mod tree;
 
 pub use build::{BuildReport, MapBuilder, MapError, PlacedFrame};
 pub use descriptor::{DESCRIPTOR_LEN, Descriptor, descriptor_distance2};
+pub use gate_cells::{CellGate, GateCells};
 pub use params::{MAX_LEVELS, MapCapacity, MapParams, MapParamsError};
 pub use region::{GateVolume, ImageRegion, MAX_GATE_CORNERS, PixelGate, PolygonEdge, RayEllipsoid, RowSpans};
 pub use restore::{MapParts, RestoreError};

@@ -2,6 +2,7 @@
 //! gate on the pixels' 3-D points (paper §5.2: only the volume of interest around the
 //! object's last pose, and only points likely under the model's spatial distribution).
 
+use super::gate_cells::GateCells;
 use nalgebra::{Matrix3, Vector3};
 use std::ops::Range;
 
@@ -153,6 +154,9 @@ pub struct PixelGate {
     pub volume: Option<GateVolume>,
     /// Points outside this box (min, max corner; object frame) are dropped first.
     pub bounds: (Vector3<f32>, Vector3<f32>),
+    /// The gate prepared for whole cells (`GateCells::new`), if it was: the image
+    /// aggregation then tests single points only in cells the gate's boundary cuts.
+    pub cells: Option<GateCells>,
 }
 
 impl PixelGate {
@@ -336,6 +340,7 @@ mod tests {
                 max_z: 0.5,
             }),
             bounds: (Vector3::repeat(-1.0), Vector3::repeat(1.0)),
+            cells: None,
         };
         assert!(gate.keeps(&Vector3::new(0.0, 0.0, 1.1)));
         assert!(!gate.keeps(&Vector3::new(0.0, 0.0, 1.0)), "on the support plane: below min_z");

@@ -3,7 +3,7 @@
 
 use super::params::TrackerParams;
 use crate::geometry::{CameraModel, Pose};
-use crate::map::{GateVolume, ImageRegion, MAX_GATE_CORNERS, PixelGate, RayEllipsoid, RowSpans};
+use crate::map::{GateCells, GateVolume, ImageRegion, MAX_GATE_CORNERS, PixelGate, RayEllipsoid, RowSpans};
 use crate::slam::VolumeShape;
 use nalgebra::{Matrix3, Point3, Vector3};
 use thiserror::Error;
@@ -40,6 +40,9 @@ pub struct ModelExtent {
     gate_bounds: (Vector3<f32>, Vector3<f32>),
     /// The gate's volume test, if the box does not already decide it.
     gate_volume: Option<GateVolume>,
+    /// A prism volume's whole footprint polygon (the gate's volume test keeps only the
+    /// edges that matter within its box; whole-cell decisions need all of them).
+    footprint: Option<heapless::Vec<[f32; 2], MAX_GATE_CORNERS>>,
     /// Bounding box of the volume (object frame), if any.
     volume_box: Option<(Vector3<f64>, Vector3<f64>)>,
     /// Bounding box of the model's surfels (object frame), grown by a margin.
@@ -79,18 +82,31 @@ impl ModelExtent {
                 (Some(GateVolume::Box { half_extents: half_extents.map(|v| v as f32) }), Some((-h, h)))
             }
         };
+        let footprint = match &volume {
+            Some(GateVolume::Prism { polygon, .. }) => Some(polygon.clone()),
+            _ => None,
+        };
         let (lo, hi) = (bounds.0.cast(), bounds.1.cast());
         let (gate_bounds, gate_volume) = match &volume {
             Some(v) => v.for_points_within(&lo, &hi),
             None => ((lo, hi), None),
         };
-        Ok(ModelExtent { mean, covariance, inverse_covariance, gate_bounds, gate_volume, volume_box, bounds })
+        Ok(ModelExtent {
+            mean,
+            covariance,
+            inverse_covariance,
+            gate_bounds,
+            gate_volume,
+            footprint,
+            volume_box,
+            bounds,
+        })
     }
 
     /// The gate at `object_from_camera`: points inside the volume and within
     /// `max_mahalanobis2` of the model's distribution.
     pub fn gate(&self, object_from_camera: &Pose, max_mahalanobis2: f64) -> PixelGate {
-        PixelGate {
+        let mut gate = PixelGate {
             rotation: object_from_camera.rotation.to_rotation_matrix().into_inner().cast(),
             translation: object_from_camera.translation.vector.cast(),
             mean: self.mean.cast(),
@@ -98,7 +114,10 @@ impl ModelExtent {
             max_mahalanobis2: max_mahalanobis2 as f32,
             volume: self.gate_volume.clone(),
             bounds: self.gate_bounds,
-        }
+            cells: None,
+        };
+        gate.cells = GateCells::new(&gate, self.footprint.as_deref());
+        gate
     }
 
     /// The bounding box (object frame) of the points the gate can keep.
