@@ -11,7 +11,7 @@
 use super::associate::DirCandidates;
 use super::cost::{rotate_symmetric, symmetric_inverse};
 use crate::geometry::Pose;
-use crate::map::{NONE, SurfelMap};
+use crate::map::{NONE, SELF_NEIGHBOR, SurfelMap};
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 
@@ -120,7 +120,11 @@ fn best_match(
     };
     let mut best = f64::INFINITY;
     let fixed_trace = c.trace() + reg.trace();
-    for &m in b.neighbors(center).iter().filter(|&&m| m != NONE) {
+    // The centre cell first: its surfels are the likeliest best, and the earlier a good
+    // match is found, the more of the other candidates the bound below skips (the
+    // minimum does not depend on the order).
+    let around = b.neighbors(center).iter().enumerate().filter(|&(k, &m)| k != SELF_NEIGHBOR && m != NONE);
+    for m in std::iter::once(center).chain(around.map(|(_, &m)| m)) {
         let slots = &b.nodes()[m as usize].surfels;
         for &sb in dirs.iter().map(|&k| &slots[k as usize]).filter(|&&s| s != NONE) {
             let other = &b.surfels()[sb as usize];
