@@ -294,9 +294,10 @@ impl Band {
     }
 
     /// Whether the gate keeps the camera-frame point `p` of cell `key` (`packed` with its
-    /// level; `inv` = 1 / the cell size): decided for the point's whole cell where the gate was prepared for cells and does not cut it
-    /// (`GateCells`), else by testing the point. (A placed frame's cells are in another
-    /// frame than the gate's points: there every point is tested.)
+    /// level; `inv` = 1 / the cell size): decided once for the point's whole cell where
+    /// the gate was prepared for cells and does not cut it (`GateCells`), else by testing
+    /// the point. (A placed frame's cells are in another frame than the gate's points:
+    /// there every point is tested.)
     #[inline(always)]
     fn gate_keeps<const PLACED: bool>(
         &mut self,
