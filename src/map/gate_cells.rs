@@ -14,6 +14,7 @@
 //! of the gate, and the gate's Mahalanobis bound is widened by [`MAHALANOBIS_SLACK`].
 
 use super::region::{GateVolume, MAX_GATE_CORNERS, PixelGate, point_in_polygon};
+use crate::geometry::eigen3::symmetric_eigenvalues;
 use nalgebra::{Matrix3, Vector3};
 
 /// Metres added to a cell's half diagonal before it is compared with the gate.
@@ -101,7 +102,7 @@ impl GateCells {
             }
         }
         let inverse_covariance: Matrix3<f64> = gate.inverse_covariance.cast();
-        let largest = inverse_covariance.symmetric_eigen().eigenvalues.max();
+        let largest = symmetric_eigenvalues(&inverse_covariance)[2];
         let cells = GateCells {
             rotation: gate.rotation.cast(),
             translation: gate.translation.cast(),
@@ -175,15 +176,8 @@ impl GateCells {
 mod tests {
     use super::*;
     use crate::map::region::PixelGate;
+    use crate::synthetic::Pcg32;
     use nalgebra::{Rotation3, Vector3};
-
-    struct Lcg(u64);
-    impl Lcg {
-        fn unit(&mut self) -> f64 {
-            self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (self.0 >> 11) as f64 / (1u64 << 53) as f64
-        }
-    }
 
     /// Gates as the tracker builds them: the object 1 m in front of a turned camera,
     /// with no volume, a box volume, and a concave prism planned for the gate's box.
@@ -224,13 +218,17 @@ mod tests {
     /// against the gate's own test on points spread over each cell (its corners and
     /// faces included); returns the violations and how many cells each class got.
     fn check(half_diagonal: f64) -> (usize, [usize; 3]) {
-        let mut rng = Lcg(11);
+        let mut rng = Pcg32::new(11);
         let (mut violations, mut counts) = (0, [0; 3]);
         for (gate, footprint) in gates() {
             let cells = GateCells::new(&gate, footprint.as_deref()).expect("prepared");
             for inv in [80.0f32, 40.0, 20.0] {
                 for _ in 0..1500 {
-                    let centre = Vector3::new(rng.unit() - 0.5, rng.unit() - 0.5, 0.6 + 0.8 * rng.unit()) * 1.0;
+                    let centre = Vector3::new(
+                        rng.uniform(0.0, 1.0) - 0.5,
+                        rng.uniform(0.0, 1.0) - 0.5,
+                        0.6 + 0.8 * rng.uniform(0.0, 1.0),
+                    ) * 1.0;
                     let key = [0, 1, 2].map(|i| (centre[i] as f32 * inv).floor() as i32);
                     let class = cells.classify_with(key, inv, half_diagonal);
                     counts[class as usize] += 1;
@@ -242,7 +240,11 @@ mod tests {
                             let t = if s < 8 { ((s >> i) & 1) as f64 * 0.999_999 } else { r };
                             ((key[i] as f64 + t) / inv as f64) as f32
                         };
-                        let p = Vector3::new(f(0, rng.unit()), f(1, rng.unit()), f(2, rng.unit()));
+                        let p = Vector3::new(
+                            f(0, rng.uniform(0.0, 1.0)),
+                            f(1, rng.uniform(0.0, 1.0)),
+                            f(2, rng.uniform(0.0, 1.0)),
+                        );
                         if [0, 1, 2].map(|i| (p[i] * inv).floor() as i32) != key {
                             continue;
                         }
