@@ -5,6 +5,7 @@
 use super::aggregate::{Aggregate, Band};
 use super::descriptor::{DESCRIPTOR_LEN, Descriptor, compute_descriptors};
 use super::evaluate::{CHUNK, RawMoments, estimate_normals, evaluate_statistics, surfel_neighborhoods};
+use super::radix::{Coded, sort_by_code};
 use super::stats::SurfelStats;
 use super::tree::{NONE, morton_code};
 use super::{Surfel, SurfelMap};
@@ -14,7 +15,11 @@ use rayon::prelude::*;
 #[derive(Debug, Default)]
 pub(crate) struct Assembly {
     /// Aggregates in Morton order of their cells: `(code, band, index in band)`.
-    order: Vec<(u64, u32, u32)>,
+    order: Vec<Coded>,
+    /// Scratch of the radix sort.
+    order_scratch: Vec<Coded>,
+    /// Per aggregate in that order: its cell key and level (read once per tree level).
+    cells: Vec<([i32; 3], u8)>,
     /// Per aggregate in that order: its node at the level being built, then its target.
     target: Vec<u32>,
     raw: Vec<RawMoments>,
@@ -32,6 +37,8 @@ impl Assembly {
     pub(crate) fn with_capacity(aggregates: usize, surfels: usize) -> Self {
         Assembly {
             order: Vec::with_capacity(aggregates),
+            order_scratch: Vec::with_capacity(aggregates),
+            cells: Vec::with_capacity(aggregates),
             target: Vec::with_capacity(aggregates),
             raw: Vec::with_capacity(surfels),
             simple: Vec::with_capacity(surfels),
@@ -64,6 +71,7 @@ impl Assembly {
     /// The aggregates in Morton order of their cells (at the finest scale), so that
     /// nodes — created in this order level by level — and their surfels are laid out
     /// in space-filling-curve order: registration then walks both maps with locality.
+    /// Their cells are copied out in that order, for the passes that build the tree.
     fn sort_aggregates(&mut self, bands: &[Band]) {
         self.order.clear();
         for (b, band) in bands.iter().enumerate() {
@@ -73,7 +81,12 @@ impl Assembly {
                 self.order.push((morton_code(fine), b as u32, i as u32));
             }
         }
-        self.order.par_sort_unstable();
+        sort_by_code(&mut self.order, &mut self.order_scratch);
+        self.cells.clear();
+        self.cells.extend(self.order.iter().map(|&(_, b, i)| {
+            let agg = &bands[b as usize].aggregates[i as usize];
+            (agg.key, agg.level)
+        }));
     }
 
     fn aggregates<'a>(&'a self, bands: &'a [Band]) -> impl Iterator<Item = &'a Aggregate> + 'a {
@@ -89,16 +102,23 @@ impl Assembly {
         let top = map.tree.top_level();
         for level in (0..=top).rev() {
             map.tree.open_level(level);
-            for (&(_, b, i), target) in self.order.iter().zip(self.target.iter_mut()) {
-                let agg = &bands[b as usize].aggregates[i as usize];
-                let agg_level = agg.level as usize;
+            // The aggregates of one cell are contiguous in Morton order at every level:
+            // a cell met right before is the same node (no look-up).
+            let mut last: Option<([i32; 3], u32)> = None;
+            for (&(agg_key, agg_level), target) in self.cells.iter().zip(self.target.iter_mut()) {
+                let agg_level = agg_level as usize;
                 if agg_level > level || (level != top && *target == NONE) {
                     continue;
                 }
                 let s = (level - agg_level) as u32;
-                let key = [agg.key[0] >> s, agg.key[1] >> s, agg.key[2] >> s];
-                let node = if level == top { map.tree.top_node(key) } else { map.tree.child_node(*target, key) };
-                *target = node.unwrap_or(NONE);
+                let key = [agg_key[0] >> s, agg_key[1] >> s, agg_key[2] >> s];
+                let node = match last {
+                    Some((k, node)) if k == key => node,
+                    _ if level == top => map.tree.top_node(key).unwrap_or(NONE),
+                    _ => map.tree.child_node(*target, key).unwrap_or(NONE),
+                };
+                *target = node;
+                last = Some((key, node));
             }
             map.tree.close_level(level);
         }
@@ -128,31 +148,139 @@ impl Assembly {
         }
     }
 
-    /// Merges every aggregate into the surfels of its target node (Eq. 1).
+    /// Merges every aggregate into the surfels of its target node (Eq. 1), in parallel:
+    /// see [`insert_chunks`]. Each surfel receives its aggregates in the same order as
+    /// one pass over them would give, so the map does not depend on the thread count.
     fn insert_aggregates(&self, bands: &[Band], map: &mut SurfelMap) {
         let max_points = map.params.max_points;
-        for (&(_, b, i), &t) in self.order.iter().zip(&self.target) {
-            if t == NONE {
-                continue;
-            }
-            let band = &bands[b as usize];
-            let agg = &band.aggregates[i as usize];
-            let node = map.tree.nodes[t as usize];
-            for dir in 0..6 {
-                let s = node.surfels[dir];
-                if agg.dir_mask & (1 << dir) == 0 || s == NONE {
+        let chunks = insert_chunks(&self.cells, &self.target, &map.tree.nodes, map.surfels.len(), map.tree.top_level());
+        let nodes = &map.tree.nodes;
+        let mut work: heapless::Vec<InsertWork, MAX_INSERT_CHUNKS> = heapless::Vec::new();
+        let (mut stats, mut view_dirs) = (&mut map.stats[..], &mut map.view_dirs[..]);
+        let mut offset = 0;
+        for (c, chunk) in chunks.iter().enumerate() {
+            let end = chunks.get(c + 1).map_or(stats.len() + offset, |next| next.first_surfel);
+            // Surfels before the run that no run writes stay as they are.
+            let (_, s_tail) = std::mem::take(&mut stats).split_at_mut(chunk.first_surfel - offset);
+            let (_, v_tail) = std::mem::take(&mut view_dirs).split_at_mut(chunk.first_surfel - offset);
+            let (s_mine, s_rest) = s_tail.split_at_mut(end - chunk.first_surfel);
+            let (v_mine, v_rest) = v_tail.split_at_mut(end - chunk.first_surfel);
+            (stats, view_dirs, offset) = (s_rest, v_rest, end);
+            // As many as there are chunks: within the capacity.
+            let _ = work.push(InsertWork { chunk: chunk.clone(), stats: s_mine, view_dirs: v_mine });
+        }
+        let (order, cells, target) = (&self.order, &self.cells, &self.target);
+        work.as_mut_slice().par_iter_mut().for_each(|InsertWork { chunk, stats, view_dirs }| {
+            for k in chunk.positions.clone() {
+                let t = target[k];
+                if cells[k].1 != chunk.level || t == NONE {
                     continue;
                 }
-                let st = &mut map.stats[s as usize];
-                if st.count < max_points {
-                    st.merge(&agg.stats(&band.moments, dir));
-                }
-                if map.view_dirs[s as usize] == [0.0; 3] {
-                    map.view_dirs[s as usize] = agg.view_dir;
+                let (_, b, i) = order[k];
+                let band = &bands[b as usize];
+                let agg = &band.aggregates[i as usize];
+                let node = &nodes[t as usize];
+                for dir in 0..6 {
+                    let s = node.surfels[dir];
+                    if agg.dir_mask & (1 << dir) == 0 || s == NONE {
+                        continue;
+                    }
+                    let j = s as usize - chunk.first_surfel;
+                    if stats[j].count < max_points {
+                        stats[j].merge(&agg.stats(&band.moments, dir));
+                    }
+                    if view_dirs[j] == [0.0; 3] {
+                        view_dirs[j] = agg.view_dir;
+                    }
                 }
             }
+        });
+    }
+}
+
+/// Aggregates per parallel work item of [`Assembly::insert_aggregates`] (about).
+const INSERT_CHUNK: usize = 384;
+
+/// At most this many work items (a VGA frame makes ~6 000 aggregates: ~16).
+const MAX_INSERT_CHUNKS: usize = 48;
+
+/// A run of aggregates of one level, whose target nodes no other run has.
+#[derive(Debug, Clone)]
+struct InsertChunk {
+    /// Level of the aggregates it inserts (others in `positions` belong to other runs).
+    level: u8,
+    /// Positions in the Morton order.
+    positions: std::ops::Range<usize>,
+    /// First surfel it may write: the surfels of its target nodes follow, up to the
+    /// next run's `first_surfel`.
+    first_surfel: usize,
+}
+
+/// A run and the surfels it writes.
+struct InsertWork<'a> {
+    chunk: InsertChunk,
+    stats: &'a mut [SurfelStats],
+    view_dirs: &'a mut [[f32; 3]],
+}
+
+/// Cuts the aggregates into runs that write disjoint, contiguous surfel ranges, in
+/// surfel order. The aggregates of one level whose cells share a Morton prefix are
+/// contiguous in the Morton order, and their nodes were created in that order, so the
+/// target nodes of a level's aggregates ascend along the order; surfels are in node
+/// order, coarsest level first. A run is cut only where the target node changes.
+fn insert_chunks(
+    cells: &[([i32; 3], u8)],
+    target: &[u32],
+    nodes: &[super::Node],
+    num_surfels: usize,
+    top: usize,
+) -> heapless::Vec<InsertChunk, MAX_INSERT_CHUNKS> {
+    let per_level = (MAX_INSERT_CHUNKS / (top + 1)).max(1);
+    // Runs of about INSERT_CHUNK aggregates, fewer where a level has more.
+    let size = INSERT_CHUNK.max(cells.len().div_ceil(per_level));
+    let mut chunks = heapless::Vec::new();
+    for level in (0..=top).rev() {
+        // (first position, first target, last target, aggregates) of the open run.
+        let mut run: Option<(usize, u32, u32, usize)> = None;
+        let mut made = 0;
+        for (k, (&(_, l), &t)) in cells.iter().zip(target).enumerate() {
+            if l as usize != level || t == NONE {
+                continue;
+            }
+            run = match run {
+                None => Some((k, t, t, 1)),
+                Some((start, first, last, count)) if count >= size && t != last && made + 1 < per_level => {
+                    push_chunk(&mut chunks, level, start..k, first, nodes, num_surfels);
+                    made += 1;
+                    Some((k, t, t, 1))
+                }
+                Some((start, first, _, count)) => Some((start, first, t, count + 1)),
+            };
+        }
+        if let Some((start, first, _, _)) = run {
+            push_chunk(&mut chunks, level, start..cells.len(), first, nodes, num_surfels);
         }
     }
+    chunks
+}
+
+/// Adds the run of `level`'s aggregates at `positions` whose first target is `first_node`.
+fn push_chunk(
+    chunks: &mut heapless::Vec<InsertChunk, MAX_INSERT_CHUNKS>,
+    level: usize,
+    positions: std::ops::Range<usize>,
+    first_node: u32,
+    nodes: &[super::Node],
+    num_surfels: usize,
+) {
+    // The first surfel of this node or a later one (a node may have none, where the
+    // surfel arena was full).
+    let first_surfel = nodes[first_node as usize..]
+        .iter()
+        .find_map(|n| n.surfels.iter().copied().filter(|&s| s != NONE).min())
+        .map_or(num_surfels, |s| s as usize);
+    // The budget per level keeps the count within the capacity.
+    let _ = chunks.push(InsertChunk { level: level as u8, positions, first_surfel });
 }
 
 /// Creates one surfel per node and used view direction, in node order (so surfels
@@ -242,5 +370,79 @@ fn surfel_range(nodes: &[super::Node], num_surfels: usize, ns: usize, ne: usize)
             let end = first_of(ne, nodes.len()).map(|s| s as usize).unwrap_or(num_surfels);
             (first, end)
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::map::{MapCapacity, MapParams};
+    use crate::synthetic::Pcg32;
+
+    /// Bands of random aggregates over three levels: many cells receive several
+    /// aggregates, from one band or from several, and some aggregates two directions.
+    fn random_bands(rng: &mut Pcg32) -> Vec<Band> {
+        let mut bands: Vec<Band> = (0..6).map(|b| Band::new(b * 32..(b + 1) * 32, 64)).collect();
+        for _ in 0..9000 {
+            let band = &mut bands[rng.next_u32() as usize % 6];
+            let level = (rng.next_u32() % 3) as u8;
+            let span = 24 >> level;
+            let key = [0, 1, 2].map(|_| (rng.next_u32() % span) as i32 - span as i32 / 2);
+            let dirs: u8 = if rng.next_u32().is_multiple_of(5) { 0b100001 } else { 1 << (rng.next_u32() % 6) };
+            let mut moments = [NONE; 6];
+            for dir in (0..6).filter(|d| dirs & (1 << d) != 0) {
+                let m: [f32; 28] = std::array::from_fn(|k| if k == 0 { 10.0 } else { rng.uniform(-0.1, 0.1) as f32 });
+                band.moments.push(m);
+                moments[dir] = band.moments.len() as u32 - 1;
+            }
+            let reference = [0, 1, 2, 3, 4, 5].map(|_| rng.uniform(-1.0, 1.0) as f32);
+            let view_dir = [0, 1, 2].map(|_| rng.uniform(-1.0, 1.0) as f32);
+            band.aggregates.push(Aggregate {
+                key,
+                level,
+                dir_mask: dirs,
+                excluded_dirs: 0,
+                border: false,
+                moments,
+                reference,
+                view_dir,
+            });
+        }
+        bands
+    }
+
+    #[test]
+    fn parallel_insertion_gives_every_surfel_its_aggregates_in_one_pass_order() {
+        let mut rng = Pcg32::new(11);
+        let bands = random_bands(&mut rng);
+        let mut map = SurfelMap::new(MapParams::default(), MapCapacity::for_image(640 * 480)).expect("valid");
+        let mut assembly = Assembly::with_capacity(9000, map.surfel_capacity());
+        map.clear();
+        assert_eq!(assembly.create_nodes(&bands, &mut map), 0);
+        assembly.propagate_node_flags(&bands, &mut map);
+        assert_eq!(assign_surfels(&mut map), 0);
+        let chunks =
+            insert_chunks(&assembly.cells, &assembly.target, &map.tree.nodes, map.surfels.len(), map.tree.top_level());
+        assert!(chunks.len() > 8, "the test should exercise many runs, not {}", chunks.len());
+        // The reference: one pass over the aggregates in Morton order.
+        let (mut stats, mut view_dirs) = (map.stats.clone(), map.view_dirs.clone());
+        for (&(_, b, i), &t) in assembly.order.iter().zip(&assembly.target) {
+            let band = &bands[b as usize];
+            let agg = &band.aggregates[i as usize];
+            let node = map.tree.nodes[t as usize];
+            for dir in (0..6).filter(|d| agg.dir_mask & (1 << d) != 0) {
+                let s = node.surfels[dir] as usize;
+                stats[s].merge(&agg.stats(&band.moments, dir));
+                if view_dirs[s] == [0.0; 3] {
+                    view_dirs[s] = agg.view_dir;
+                }
+            }
+        }
+        assembly.insert_aggregates(&bands, &mut map);
+        assert!(stats.iter().filter(|s| s.count > 0.0).count() > 1000);
+        assert!(
+            stats.iter().zip(&map.stats).all(|(a, b)| a.count == b.count && a.sum == b.sum && a.scatter == b.scatter)
+        );
+        assert_eq!(view_dirs, map.view_dirs);
     }
 }

@@ -17,6 +17,7 @@ mod descriptor;
 mod evaluate;
 pub mod gate_cells;
 pub mod params;
+mod radix;
 pub mod region;
 mod restore;
 pub mod stats;
