@@ -30,45 +30,52 @@ pub fn descriptor_distance2(a: &Descriptor, b: &Descriptor) -> f32 {
     a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum()
 }
 
-/// Soft-bins a cosine `c ∈ [−1, 1]` into bins centred at −1, 0, +1. Without branches:
-/// the sign of `c` is not predictable, and the bin not hit receives `w · 0`.
-#[inline]
-fn bin_shape(c: f32, w: f32, out: &mut [f32]) {
-    let c = c.clamp(-1.0, 1.0);
-    out[0] += w * (-c).max(0.0);
-    out[1] += w * (1.0 - c.abs());
-    out[2] += w * c.max(0.0);
+/// One value per relation of a pair: `nᵢ·d̂`, `nⱼ·d̂`, `nᵢ·nⱼ`, `ΔL`, `Δα`, `Δβ`, and two
+/// unused lanes (eight, so that the binning below runs as two 4-wide vector operations).
+type Relations = [f32; 8];
+
+/// A surfel's bins while its pairs are added, bin-major: `sums[b][r]` is bin `b` of
+/// relation `r` (entry `3r + b` of the descriptor).
+type BinSums = [Relations; 3];
+
+/// Soft-bins each relation `x` into (negative, zero, positive) with weight `w`: with
+/// `a = min(|x| · scale, 1)`, the bins receive `w·a` on the side of `x`'s sign, and
+/// `w·(1 − a)` in the middle. For the cosines (`scale` 1) this is binning at −1, 0, +1
+/// of `x` clamped to [−1, 1]; for the colour differences (`scale` = 1 / θ) saturation at
+/// θ. Without branches: signs are not predictable, and the bin not hit receives `w · 0`.
+#[inline(always)]
+fn bin_relations(x: &Relations, scale: &Relations, w: f32, sums: &mut BinSums) {
+    for r in 0..8 {
+        let s = x[r].abs() * scale[r];
+        let a = if s < 1.0 { s } else { 1.0 };
+        let negative = if x[r] < 0.0 { a } else { 0.0 };
+        sums[0][r] += w * negative;
+        sums[1][r] += w * (1.0 - a);
+        sums[2][r] += w * (a - negative);
+    }
 }
 
-/// Soft-bins a colour difference into (negative, zero, positive), saturating at
-/// `1 / inv_theta` (without branches, as [`bin_shape`]).
-#[inline]
-fn bin_texture(d: f32, inv_theta: f32, w: f32, out: &mut [f32]) {
-    let a = (d.abs() * inv_theta).min(1.0);
-    let negative = if d < 0.0 { a } else { 0.0 };
-    out[0] += w * negative;
-    out[1] += w * (1.0 - a);
-    out[2] += w * (a - negative);
-}
-
+/// Adds the relations of `me` to `other`, weighted by `weight`, to `me`'s bins.
+#[inline(always)]
 fn add_pair(
     me: (&Surfel, &Vector3<f32>),
     other: (&Surfel, &Vector3<f32>),
     weight: f32,
-    inv_theta: f32,
-    h: &mut Descriptor,
+    scale: &Relations,
+    sums: &mut BinSums,
 ) {
     let ((me, n_me), (other, n_other)) = (me, other);
     let diff: Vector3<f32> = other.mean - me.mean;
     let len = diff.norm();
     let d = if len > 0.0 { diff * (1.0 / len) } else { Vector3::zeros() };
-    bin_shape(n_me.dot(&d), weight, &mut h[0..3]);
-    bin_shape(n_other.dot(&d), weight, &mut h[3..6]);
-    bin_shape(n_me.dot(n_other), weight, &mut h[6..9]);
     let dc = other.color - me.color;
-    bin_texture(dc.x, inv_theta, weight, &mut h[9..12]);
-    bin_texture(dc.y, inv_theta, weight, &mut h[12..15]);
-    bin_texture(dc.z, inv_theta, weight, &mut h[15..18]);
+    let relations = [n_me.dot(&d), n_other.dot(&d), n_me.dot(n_other), dc.x, dc.y, dc.z, 0.0, 0.0];
+    bin_relations(&relations, scale, weight, sums);
+}
+
+/// The descriptor of bin sums (entry `3r + b` = `sums[b][r]`).
+fn from_bin_sums(sums: &BinSums) -> Descriptor {
+    std::array::from_fn(|k| sums[k % 3][k / 3])
 }
 
 fn normalize_rows(h: &mut Descriptor) {
@@ -95,6 +102,7 @@ fn neighbor_surfels<'a>(surfels: &'a [Surfel], row: &'a [u32; 27]) -> impl Itera
 /// Computes the descriptors of all valid surfels; `simple` is scratch of the same length.
 pub(crate) fn compute_descriptors(map: &mut SurfelMap, simple: &mut [Descriptor]) {
     let inv_theta = 1.0 / map.params.texture_bin_threshold;
+    let scale: Relations = [1.0, 1.0, 1.0, inv_theta, inv_theta, inv_theta, 0.0, 0.0];
     let weight = map.params.descriptor_neighbor_weight;
     let rows = &map.surfel_neighbors;
     let surfels = &map.surfels;
@@ -108,10 +116,12 @@ pub(crate) fn compute_descriptors(map: &mut SurfelMap, simple: &mut [Descriptor]
                 continue;
             }
             let mine = (me, &normals[idx]);
-            add_pair(mine, mine, me.count, inv_theta, h);
+            let mut sums: BinSums = [[0.0; 8]; 3];
+            add_pair(mine, mine, me.count, &scale, &mut sums);
             for (s, other) in neighbor_surfels(surfels, &rows[idx]) {
-                add_pair(mine, (other, &normals[s as usize]), other.count, inv_theta, h);
+                add_pair(mine, (other, &normals[s as usize]), other.count, &scale, &mut sums);
             }
+            *h = from_bin_sums(&sums);
             normalize_rows(h);
         }
     });
@@ -138,17 +148,56 @@ pub(crate) fn compute_descriptors(map: &mut SurfelMap, simple: &mut [Descriptor]
 mod tests {
     use super::*;
 
+    /// The paper's binning of one relation, written out: a cosine clamped to [−1, 1]
+    /// into bins at −1, 0, +1; a colour difference saturating at θ.
+    fn bin_one(x: f32, texture: bool, inv_theta: f32, w: f32) -> [f32; 3] {
+        if texture {
+            let a = (x.abs() * inv_theta).min(1.0);
+            let negative = if x < 0.0 { a } else { 0.0 };
+            [w * negative, w * (1.0 - a), w * (a - negative)]
+        } else {
+            let c = x.clamp(-1.0, 1.0);
+            [w * (-c).max(0.0), w * (1.0 - c.abs()), w * c.max(0.0)]
+        }
+    }
+
     #[test]
     fn bins_sum_to_weight_and_interpolate() {
-        let mut h = [0.0f32; 3];
-        bin_shape(0.25, 2.0, &mut h);
-        assert_eq!(h, [0.0, 1.5, 0.5]);
-        let mut t = [0.0f32; 3];
-        bin_texture(-0.05, 10.0, 1.0, &mut t);
-        assert!((t[0] - 0.5).abs() < 1e-6 && (t[1] - 0.5).abs() < 1e-6 && t[2] == 0.0);
-        let mut t = [0.0f32; 3];
-        bin_texture(0.3, 10.0, 1.0, &mut t);
-        assert_eq!(t, [0.0, 0.0, 1.0]);
+        let scale = [1.0, 1.0, 1.0, 10.0, 10.0, 10.0, 0.0, 0.0];
+        let mut sums: BinSums = [[0.0; 8]; 3];
+        bin_relations(&[0.25, 0.0, 0.0, -0.05, 0.3, 0.0, 0.0, 0.0], &scale, 2.0, &mut sums);
+        let h = from_bin_sums(&sums);
+        assert_eq!(h[0..3], [0.0, 1.5, 0.5]);
+        assert!((h[9] - 1.0).abs() < 1e-6 && (h[10] - 1.0).abs() < 1e-6 && h[11] == 0.0);
+        assert_eq!(h[12..15], [0.0, 0.0, 2.0]);
+    }
+
+    /// The lane-wise binning gives, bit for bit, the binning of each relation on its own
+    /// (the clamp of the cosines included), summed in the same order.
+    #[test]
+    fn lane_binning_equals_the_binning_of_each_relation() {
+        let mut rng = crate::synthetic::Pcg32::new(9);
+        let inv_theta = 1.0 / 0.1;
+        let scale = [1.0, 1.0, 1.0, inv_theta, inv_theta, inv_theta, 0.0, 0.0];
+        let mut sums: BinSums = [[0.0; 8]; 3];
+        let mut expect = [0.0f32; DESCRIPTOR_LEN];
+        let specials = [0.0, -0.0, 1.0, -1.0, 1.0 + 1e-6, -1.0 - 1e-6, 0.1, -0.1, 1e-30];
+        for k in 0..5000 {
+            let x: Relations = std::array::from_fn(|r| match (r, k % 3) {
+                (6 | 7, _) => 0.0,
+                (_, 0) => specials[(k / 3 + r) % specials.len()],
+                _ => rng.uniform(-1.2, 1.2) as f32,
+            });
+            let w = rng.uniform(1.0, 500.0) as f32;
+            bin_relations(&x, &scale, w, &mut sums);
+            for r in 0..6 {
+                let bins = bin_one(x[r], r >= 3, inv_theta, w);
+                for b in 0..3 {
+                    expect[3 * r + b] += bins[b];
+                }
+            }
+        }
+        assert_eq!(from_bin_sums(&sums).map(f32::to_bits), expect.map(f32::to_bits));
     }
 
     #[test]
