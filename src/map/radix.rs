@@ -1,9 +1,10 @@
 //! Least-significant-digit radix sort of aggregates by their Morton code.
 //!
-//! A frame yields a few thousand aggregates; a comparison sort of them (in parallel or
-//! not) costs more than the tree it orders. Eight stable passes over bytes of the code —
-//! skipping every byte that all codes share, as the high bytes of a scene's cells do —
-//! cost a counting pass and a few scatters.
+//! A frame yields a few thousand aggregates: too few for a parallel sort to pay for
+//! waking the pool's threads, and a comparison sort of them on one thread costs about as
+//! much (measured: the same instructions within 0.2 %, the same time). Eight stable
+//! passes over bytes of the code — skipping every byte that all codes share — need no
+//! comparisons and no threads.
 
 /// An aggregate's Morton code, band and index in the band.
 pub(crate) type Coded = (u64, u32, u32);
