@@ -330,24 +330,21 @@ impl NodeArena {
 
     /// Fills the 27-neighbourhood of every node (same level only), coarsest level first:
     /// the coarsest level by hash look-ups, every finer level from its parent's
-    /// neighbours' children.
+    /// neighbours' children; within a level in parallel (each node writes its own row).
     pub(crate) fn establish_neighbors(&mut self) {
         self.neighbors.clear();
         self.neighbors.resize(self.nodes.len(), [NONE; 27]);
         let top = self.top_level();
-        for i in self.level_start[top]..self.level_end[top] {
-            let key = self.nodes[i as usize].key;
-            let mut nb = [NONE; 27];
-            for dx in -1..=1 {
-                for dy in -1..=1 {
-                    for dz in -1..=1 {
-                        let k = [key[0] + dx, key[1] + dy, key[2] + dz];
-                        nb[neighbor_index(dx, dy, dz)] = self.top.get(k).unwrap_or(NONE);
-                    }
+        let (start, end) = (self.level_start[top] as usize, self.level_end[top] as usize);
+        let (nodes, hash) = (&self.nodes, &self.top);
+        self.neighbors[start..end].par_chunks_mut(NEIGHBOR_CHUNK).enumerate().for_each(|(c, out)| {
+            for (k, nb) in out.iter_mut().enumerate() {
+                let key = nodes[start + c * NEIGHBOR_CHUNK + k].key;
+                for (slot, d) in nb.iter_mut().zip(&NEIGHBOR_OFFSETS) {
+                    *slot = hash.get([key[0] + d[0], key[1] + d[1], key[2] + d[2]]).unwrap_or(NONE);
                 }
             }
-            self.neighbors[i as usize] = nb;
-        }
+        });
         for level in (0..top).rev() {
             let (start, end) = (self.level_start[level] as usize, self.level_end[level] as usize);
             let (coarser, this) = self.neighbors.split_at_mut(start);
