@@ -1,10 +1,11 @@
 //! Least-significant-digit radix sort of aggregates by their Morton code.
 //!
-//! A frame yields a few thousand aggregates: too few for a parallel sort to pay for
-//! waking the pool's threads, and a comparison sort of them on one thread costs about as
-//! much (measured: the same instructions within 0.2 %, the same time). Eight stable
-//! passes over bytes of the code — skipping every byte that all codes share — need no
-//! comparisons and no threads.
+//! A VGA frame yields ~5 300 aggregates: too few for a parallel sort to pay for waking
+//! the pool's threads. Eight stable passes over bytes of the code — skipping every byte
+//! that all codes share — need no comparisons and no threads. Measured in place on
+//! fr3_teddy (VGA, 2 threads, mean per frame): 0.14 ms, against 0.16 ms for rayon's
+//! parallel sort and 0.17 ms for the standard library's sort on one thread (the same
+//! instructions within 0.2 %; apart, on fresh data, the standard sort is the faster).
 
 /// An aggregate's Morton code, band and index in the band.
 pub(crate) type Coded = (u64, u32, u32);
