@@ -56,14 +56,14 @@ impl Assembly {
         map.tree.establish_neighbors();
         surfel_neighborhoods(map);
         // §3.1 evaluation, normals; §3.2 descriptors.
-        // Per-surfel scratch and descriptors are sized here (filled in parallel: they are
-        // written through before they are read).
+        // Per-surfel scratch and descriptors are only sized here: every entry is written
+        // before it is read, so what an earlier frame left in them does not matter.
         let n = map.surfels.len();
-        refill(&mut self.raw, RawMoments::default(), n);
+        resize_for_overwrite(&mut self.raw, RawMoments::default(), n);
         evaluate_statistics(map, &mut self.raw);
         estimate_normals(map, &self.raw);
-        refill(&mut self.simple, [0.0; DESCRIPTOR_LEN], n);
-        refill(&mut map.descriptors, [0.0; DESCRIPTOR_LEN], n);
+        resize_for_overwrite(&mut self.simple, [0.0; DESCRIPTOR_LEN], n);
+        resize_for_overwrite(&mut map.descriptors, [0.0; DESCRIPTOR_LEN], n);
         compute_descriptors(map, &mut self.simple);
         Dropped { aggregates, surfels }
     }
@@ -316,6 +316,13 @@ fn assign_surfels(map: &mut SurfelMap) -> usize {
 fn refill<T: Clone + Send + Sync>(v: &mut Vec<T>, value: T, n: usize) {
     v.clear();
     v.par_extend(rayon::iter::repeat_n(value, n));
+}
+
+/// Makes `v` hold `n` entries for a pass that writes every one of them before anything
+/// reads it: entries kept from before are not written twice (`value` fills only growth).
+fn resize_for_overwrite<T: Clone>(v: &mut Vec<T>, value: T, n: usize) {
+    v.truncate(n);
+    v.resize(n, value);
 }
 
 /// Sums children into parents, level by level from the finest (so every inner node

@@ -270,8 +270,12 @@ mod tests {
         let frame = RgbdFrame::new(0, camera, &rgb, &depth).expect("consistent frame");
         let capacity = MapCapacity::for_image(320 * 240);
         let new_map = || SurfelMap::new(MapParams::default(), capacity).expect("valid parameters");
-        let surfels =
-            |map: &SurfelMap| map.surfels().iter().map(|s| (s.node, s.dir, s.count, s.mean)).collect::<Vec<_>>();
+        // Everything per surfel, its descriptor and normal included: the scratch a builder
+        // reuses must not carry anything over from earlier frames.
+        let surfels = |map: &SurfelMap| {
+            let per_surfel = map.surfels().iter().zip(map.descriptors()).zip(map.normals());
+            per_surfel.map(|((s, d), n)| (s.node, s.dir, s.count, s.mean, s.valid, *d, *n)).collect::<Vec<_>>()
+        };
         // A builder that has seen other regions of the frame before…
         let mut used = MapBuilder::new(320, 240, capacity.surfels);
         let mut map = new_map();
