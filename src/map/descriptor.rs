@@ -48,7 +48,10 @@ fn bin_relations(x: &Relations, scale: &Relations, w: f32, sums: &mut BinSums) {
     for r in 0..8 {
         let s = x[r].abs() * scale[r];
         let a = if s < 1.0 { s } else { 1.0 };
-        let negative = if x[r] < 0.0 { a } else { 0.0 };
+        // `a` where `x` is negative, else 0 (`x = −0` gives `a = 0` either way): by the
+        // sign bit, so that the lanes stay in vector registers.
+        let sign_mask = ((x[r].to_bits() as i32) >> 31) as u32;
+        let negative = f32::from_bits(a.to_bits() & sign_mask);
         sums[0][r] += w * negative;
         sums[1][r] += w * (1.0 - a);
         sums[2][r] += w * (a - negative);
@@ -130,16 +133,17 @@ pub(crate) fn compute_descriptors(map: &mut SurfelMap, simple: &mut [Descriptor]
         for (k, h) in out.iter_mut().enumerate() {
             let idx = c * CHUNK + k;
             let me = &surfels[idx];
-            *h = simple[idx];
-            if !me.valid {
-                continue;
-            }
-            for (s, _) in neighbor_surfels(surfels, &rows[idx]) {
-                for (a, b) in h.iter_mut().zip(&simple[s as usize]) {
-                    *a += weight * b;
+            // Summed in a local array (vector registers), stored once.
+            let mut sum = simple[idx];
+            if me.valid {
+                for (s, _) in neighbor_surfels(surfels, &rows[idx]) {
+                    for (a, b) in sum.iter_mut().zip(&simple[s as usize]) {
+                        *a += weight * b;
+                    }
                 }
+                normalize_rows(&mut sum);
             }
-            normalize_rows(h);
+            *h = sum;
         }
     });
 }
