@@ -5,6 +5,7 @@
 use super::aggregate::{Aggregate, Band};
 use super::descriptor::{DESCRIPTOR_LEN, Descriptor, compute_descriptors};
 use super::evaluate::{CHUNK, RawMoments, estimate_normals, evaluate_statistics, surfel_neighborhoods};
+use super::params::MAX_LEVELS;
 use super::radix::{Coded, sort_by_code};
 use super::stats::SurfelStats;
 use super::tree::{NONE, morton_code};
@@ -22,6 +23,9 @@ pub(crate) struct Assembly {
     cells: Vec<([i32; 3], u8)>,
     /// Per aggregate in that order: its node at the level being built, then its target.
     target: Vec<u32>,
+    /// Positions in that order of the aggregates with a target, coarsest level first
+    /// (the order of their surfels).
+    by_level: Vec<u32>,
     raw: Vec<RawMoments>,
     simple: Vec<Descriptor>,
 }
@@ -40,6 +44,7 @@ impl Assembly {
             order_scratch: Vec::with_capacity(aggregates),
             cells: Vec::with_capacity(aggregates),
             target: Vec::with_capacity(aggregates),
+            by_level: Vec::with_capacity(aggregates),
             raw: Vec::with_capacity(surfels),
             simple: Vec::with_capacity(surfels),
         }
@@ -51,6 +56,7 @@ impl Assembly {
         let aggregates = self.create_nodes(bands, map);
         self.propagate_node_flags(bands, map);
         let surfels = assign_surfels(map);
+        self.order_by_level(map.tree.top_level());
         self.insert_aggregates(bands, map);
         merge_bottom_up(map);
         map.tree.establish_neighbors();
@@ -148,12 +154,35 @@ impl Assembly {
         }
     }
 
+    /// Fills `by_level`: a counting sort of the positions by level, coarsest first.
+    fn order_by_level(&mut self, top: usize) {
+        let mut start = [0u32; MAX_LEVELS + 1];
+        for (&(_, l), &t) in self.cells.iter().zip(&self.target) {
+            if t != NONE {
+                start[top - l as usize + 1] += 1;
+            }
+        }
+        for i in 1..=MAX_LEVELS {
+            start[i] += start[i - 1];
+        }
+        let total = start[MAX_LEVELS] as usize;
+        self.by_level.clear();
+        self.by_level.resize(total, 0);
+        for (k, (&(_, l), &t)) in self.cells.iter().zip(&self.target).enumerate() {
+            if t != NONE {
+                let slot = &mut start[top - l as usize];
+                self.by_level[*slot as usize] = k as u32;
+                *slot += 1;
+            }
+        }
+    }
+
     /// Merges every aggregate into the surfels of its target node (Eq. 1), in parallel:
     /// see [`insert_chunks`]. Each surfel receives its aggregates in the same order as
     /// one pass over them would give, so the map does not depend on the thread count.
     fn insert_aggregates(&self, bands: &[Band], map: &mut SurfelMap) {
         let max_points = map.params.max_points;
-        let chunks = insert_chunks(&self.cells, &self.target, &map.tree.nodes, map.surfels.len(), map.tree.top_level());
+        let chunks = insert_chunks(&self.by_level, &self.target, &map.tree.nodes, map.surfels.len());
         let nodes = &map.tree.nodes;
         let mut work: heapless::Vec<InsertWork, MAX_INSERT_CHUNKS> = heapless::Vec::new();
         let (mut stats, mut view_dirs) = (&mut map.stats[..], &mut map.view_dirs[..]);
@@ -169,17 +198,13 @@ impl Assembly {
             // As many as there are chunks: within the capacity.
             let _ = work.push(InsertWork { chunk: chunk.clone(), stats: s_mine, view_dirs: v_mine });
         }
-        let (order, cells, target) = (&self.order, &self.cells, &self.target);
+        let (order, target) = (&self.order, &self.target);
         work.as_mut_slice().par_iter_mut().for_each(|InsertWork { chunk, stats, view_dirs }| {
-            for k in chunk.positions.clone() {
-                let t = target[k];
-                if cells[k].1 != chunk.level || t == NONE {
-                    continue;
-                }
-                let (_, b, i) = order[k];
+            for &k in &self.by_level[chunk.positions.clone()] {
+                let (_, b, i) = order[k as usize];
                 let band = &bands[b as usize];
                 let agg = &band.aggregates[i as usize];
-                let node = &nodes[t as usize];
+                let node = &nodes[target[k as usize] as usize];
                 for dir in 0..6 {
                     let s = node.surfels[dir];
                     if agg.dir_mask & (1 << dir) == 0 || s == NONE {
@@ -198,18 +223,16 @@ impl Assembly {
     }
 }
 
-/// Aggregates per parallel work item of [`Assembly::insert_aggregates`] (about).
+/// Aggregates per parallel work item of [`Assembly::insert_aggregates`] (at least).
 const INSERT_CHUNK: usize = 384;
 
-/// At most this many work items (a VGA frame makes ~6 000 aggregates: ~16).
+/// At most this many work items (a VGA frame makes ~5 000 aggregates: ~14).
 const MAX_INSERT_CHUNKS: usize = 48;
 
-/// A run of aggregates of one level, whose target nodes no other run has.
+/// A run of aggregates whose target nodes no other run has.
 #[derive(Debug, Clone)]
 struct InsertChunk {
-    /// Level of the aggregates it inserts (others in `positions` belong to other runs).
-    level: u8,
-    /// Positions in the Morton order.
+    /// Its part of `Assembly::by_level`.
     positions: std::ops::Range<usize>,
     /// First surfel it may write: the surfels of its target nodes follow, up to the
     /// next run's `first_surfel`.
@@ -223,51 +246,36 @@ struct InsertWork<'a> {
     view_dirs: &'a mut [[f32; 3]],
 }
 
-/// Cuts the aggregates into runs that write disjoint, contiguous surfel ranges, in
-/// surfel order. The aggregates of one level whose cells share a Morton prefix are
-/// contiguous in the Morton order, and their nodes were created in that order, so the
-/// target nodes of a level's aggregates ascend along the order; surfels are in node
-/// order, coarsest level first. A run is cut only where the target node changes.
+/// Cuts the aggregates, taken coarsest level first and in Morton order within a level
+/// (`by_level`), into runs that write disjoint, contiguous surfel ranges, in surfel
+/// order. The aggregates of one cell are contiguous in the Morton order at every level,
+/// and each level's nodes were created in that order, so the target nodes ascend along
+/// `by_level` as the surfels do (node order, coarsest level first). A run is cut only
+/// where the target node changes.
 fn insert_chunks(
-    cells: &[([i32; 3], u8)],
+    by_level: &[u32],
     target: &[u32],
     nodes: &[super::Node],
     num_surfels: usize,
-    top: usize,
 ) -> heapless::Vec<InsertChunk, MAX_INSERT_CHUNKS> {
-    let per_level = (MAX_INSERT_CHUNKS / (top + 1)).max(1);
-    // Runs of about INSERT_CHUNK aggregates, fewer where a level has more.
-    let size = INSERT_CHUNK.max(cells.len().div_ceil(per_level));
+    // Runs of at least INSERT_CHUNK aggregates, longer where there are many.
+    let size = INSERT_CHUNK.max(by_level.len().div_ceil(MAX_INSERT_CHUNKS - 1));
     let mut chunks = heapless::Vec::new();
-    for level in (0..=top).rev() {
-        // (first position, first target, last target, aggregates) of the open run.
-        let mut run: Option<(usize, u32, u32, usize)> = None;
-        let mut made = 0;
-        for (k, (&(_, l), &t)) in cells.iter().zip(target).enumerate() {
-            if l as usize != level || t == NONE {
-                continue;
-            }
-            run = match run {
-                None => Some((k, t, t, 1)),
-                Some((start, first, last, count)) if count >= size && t != last && made + 1 < per_level => {
-                    push_chunk(&mut chunks, level, start..k, first, nodes, num_surfels);
-                    made += 1;
-                    Some((k, t, t, 1))
-                }
-                Some((start, first, _, count)) => Some((start, first, t, count + 1)),
-            };
-        }
-        if let Some((start, first, _, _)) = run {
-            push_chunk(&mut chunks, level, start..cells.len(), first, nodes, num_surfels);
+    let mut start = 0;
+    for i in 1..=by_level.len() {
+        let this = target[by_level[i - 1] as usize];
+        let next = by_level.get(i).map(|&j| target[j as usize]);
+        if next.is_none_or(|next| i - start >= size && next != this) {
+            push_chunk(&mut chunks, start..i, target[by_level[start] as usize], nodes, num_surfels);
+            start = i;
         }
     }
     chunks
 }
 
-/// Adds the run of `level`'s aggregates at `positions` whose first target is `first_node`.
+/// Adds the run at `positions` of `by_level` whose first target is `first_node`.
 fn push_chunk(
     chunks: &mut heapless::Vec<InsertChunk, MAX_INSERT_CHUNKS>,
-    level: usize,
     positions: std::ops::Range<usize>,
     first_node: u32,
     nodes: &[super::Node],
@@ -279,8 +287,8 @@ fn push_chunk(
         .iter()
         .find_map(|n| n.surfels.iter().copied().filter(|&s| s != NONE).min())
         .map_or(num_surfels, |s| s as usize);
-    // The budget per level keeps the count within the capacity.
-    let _ = chunks.push(InsertChunk { level: level as u8, positions, first_surfel });
+    // Every run but the last has at least `size` aggregates: within the capacity.
+    let _ = chunks.push(InsertChunk { positions, first_surfel });
 }
 
 /// Creates one surfel per node and used view direction, in node order (so surfels
@@ -433,8 +441,8 @@ mod tests {
             assembly.propagate_node_flags(&bands, &mut map);
             let dropped = assign_surfels(&mut map);
             assert_eq!(dropped > 0, surfels == 6000, "{dropped} surfels dropped");
-            let top = map.tree.top_level();
-            let chunks = insert_chunks(&assembly.cells, &assembly.target, &map.tree.nodes, map.surfels.len(), top);
+            assembly.order_by_level(map.tree.top_level());
+            let chunks = insert_chunks(&assembly.by_level, &assembly.target, &map.tree.nodes, map.surfels.len());
             assert!(chunks.len() > 8, "the test should exercise many runs, not {}", chunks.len());
             // The reference: one pass over the aggregates in Morton order.
             let (mut stats, mut view_dirs) = (map.stats.clone(), map.view_dirs.clone());
