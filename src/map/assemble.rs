@@ -56,7 +56,6 @@ impl Assembly {
         let aggregates = self.create_nodes(bands, map);
         self.propagate_node_flags(bands, map);
         let surfels = assign_surfels(map);
-        self.order_by_level(map.tree.top_level());
         self.insert_aggregates(bands, map);
         merge_bottom_up(map);
         map.tree.establish_neighbors();
@@ -180,7 +179,8 @@ impl Assembly {
     /// Merges every aggregate into the surfels of its target node (Eq. 1), in parallel:
     /// see [`insert_chunks`]. Each surfel receives its aggregates in the same order as
     /// one pass over them would give, so the map does not depend on the thread count.
-    fn insert_aggregates(&self, bands: &[Band], map: &mut SurfelMap) {
+    fn insert_aggregates(&mut self, bands: &[Band], map: &mut SurfelMap) {
+        self.order_by_level(map.tree.top_level());
         let max_points = map.params.max_points;
         let chunks = insert_chunks(&self.by_level, &self.target, &map.tree.nodes, map.surfels.len());
         let nodes = &map.tree.nodes;
@@ -281,12 +281,8 @@ fn push_chunk(
     nodes: &[super::Node],
     num_surfels: usize,
 ) {
-    // The first surfel of this node or a later one (a node may have none, where the
-    // surfel arena was full).
-    let first_surfel = nodes[first_node as usize..]
-        .iter()
-        .find_map(|n| n.surfels.iter().copied().filter(|&s| s != NONE).min())
-        .map_or(num_surfels, |s| s as usize);
+    // The first surfel of this node or a later one.
+    let first_surfel = first_surfel(&nodes[first_node as usize..]).unwrap_or(num_surfels);
     // Every run but the last has at least `size` aggregates: within the capacity.
     let _ = chunks.push(InsertChunk { positions, first_surfel });
 }
@@ -376,16 +372,16 @@ fn merge_bottom_up(map: &mut SurfelMap) {
 
 /// The surfel index range of the nodes `ns..ne` (surfels are assigned in node order).
 fn surfel_range(nodes: &[super::Node], num_surfels: usize, ns: usize, ne: usize) -> (usize, usize) {
-    let first_of =
-        |from: usize, to: usize| (from..to).find_map(|i| nodes[i].surfels.iter().copied().filter(|&s| s != NONE).min());
-    let first = first_of(ns, ne).map(|s| s as usize);
-    match first {
+    match first_surfel(&nodes[ns..ne]) {
         None => (0, 0),
-        Some(first) => {
-            let end = first_of(ne, nodes.len()).map(|s| s as usize).unwrap_or(num_surfels);
-            (first, end)
-        }
+        Some(first) => (first, first_surfel(&nodes[ne..]).unwrap_or(num_surfels)),
     }
+}
+
+/// The first surfel of the first of `nodes` that has one (surfels are assigned in node
+/// order; a node may have none where the surfel arena was full).
+fn first_surfel(nodes: &[super::Node]) -> Option<usize> {
+    nodes.iter().find_map(|n| n.surfels.iter().copied().filter(|&s| s != NONE).min()).map(|s| s as usize)
 }
 
 #[cfg(test)]
