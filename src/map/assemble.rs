@@ -9,7 +9,7 @@ use super::params::MAX_LEVELS;
 use super::radix::{Coded, sort_by_code};
 use super::stats::SurfelStats;
 use super::tree::{NONE, morton_code};
-use super::{Surfel, SurfelMap};
+use super::{Surfel, SurfelMap, resize_for_overwrite};
 use rayon::prelude::*;
 
 /// Scratch for assembling (allocated once for frame maps; grows for fusion).
@@ -52,7 +52,7 @@ impl Assembly {
 
     /// Replaces the content of `map` by the map of `bands`' aggregates.
     pub(crate) fn assemble(&mut self, bands: &[Band], map: &mut SurfelMap) -> Dropped {
-        map.clear();
+        map.clear_for_rebuild();
         let aggregates = self.create_nodes(bands, map);
         self.propagate_node_flags(bands, map);
         let surfels = assign_surfels(map);
@@ -320,13 +320,6 @@ fn assign_surfels(map: &mut SurfelMap) -> usize {
 fn refill<T: Clone + Send + Sync>(v: &mut Vec<T>, value: T, n: usize) {
     v.clear();
     v.par_extend(rayon::iter::repeat_n(value, n));
-}
-
-/// Makes `v` hold `n` entries for a pass that writes every one of them before anything
-/// reads it: entries kept from before are not written twice (`value` fills only growth).
-fn resize_for_overwrite<T: Clone>(v: &mut Vec<T>, value: T, n: usize) {
-    v.truncate(n);
-    v.resize(n, value);
 }
 
 /// Sums children into parents, level by level from the finest (so every inner node

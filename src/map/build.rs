@@ -232,7 +232,7 @@ fn report(bands: &[Band], map: &SurfelMap, dropped: super::assemble::Dropped) ->
 mod tests {
     use super::*;
     use crate::geometry::{CameraModel, PinholeIntrinsics};
-    use crate::map::MapCapacity;
+    use crate::map::{MapCapacity, NONE};
 
     /// A pinhole camera of `width × height` (QVGA-like intrinsics, scaled).
     fn camera(width: u32, height: u32) -> CameraModel {
@@ -270,11 +270,15 @@ mod tests {
         let frame = RgbdFrame::new(0, camera, &rgb, &depth).expect("consistent frame");
         let capacity = MapCapacity::for_image(320 * 240);
         let new_map = || SurfelMap::new(MapParams::default(), capacity).expect("valid parameters");
-        // Everything per surfel, its descriptor and normal included: the scratch a builder
-        // reuses must not carry anything over from earlier frames.
+        // Everything per surfel, its descriptor, normal and neighbourhoods included: the
+        // scratch a builder (and a map) reuses must not carry anything over from earlier
+        // frames.
         let surfels = |map: &SurfelMap| {
-            let per_surfel = map.surfels().iter().zip(map.descriptors()).zip(map.normals());
-            per_surfel.map(|((s, d), n)| (s.node, s.dir, s.count, s.mean, s.valid, *d, *n)).collect::<Vec<_>>()
+            let per_surfel = map.surfels().iter().zip(map.descriptors()).zip(map.normals()).enumerate();
+            let rows = |i: usize, s: &crate::map::Surfel| (*map.surfel_neighbors(i as u32), *map.neighbors(s.node));
+            per_surfel
+                .map(|(i, ((s, d), n))| (s.node, s.dir, s.count, s.mean, s.valid, *d, *n, rows(i, s)))
+                .collect::<Vec<_>>()
         };
         // A builder that has seen other regions of the frame before…
         let mut used = MapBuilder::new(320, 240, capacity.surfels);
@@ -288,6 +292,22 @@ mod tests {
         fresh.build_region(&frame, &region(40..200, 60..250, 40..200, 60..250), &mut expected).expect("builds");
         assert!(!expected.surfels().is_empty());
         assert_eq!(surfels(&map), surfels(&expected));
+        // The neighbourhood tables, whose rows a rebuild overwrites without clearing, hold
+        // their definitions: the nodes of the 26 neighbouring cells, and their surfels of
+        // the same view direction.
+        for (i, node) in map.nodes().iter().enumerate() {
+            for (k, o) in crate::map::tree::NEIGHBOR_OFFSETS.iter().enumerate() {
+                let key = [node.key[0] + o[0], node.key[1] + o[1], node.key[2] + o[2]];
+                let nb = map.neighbors(i as u32)[k];
+                assert_eq!(Some(nb).filter(|&n| n != NONE), map.find(node.level as usize, key), "node {i}");
+            }
+        }
+        for (i, s) in map.surfels().iter().enumerate() {
+            let expected = map
+                .neighbors(s.node)
+                .map(|n| if n == NONE { NONE } else { map.nodes()[n as usize].surfels[s.dir as usize] });
+            assert_eq!(*map.surfel_neighbors(i as u32), expected, "surfel {i}");
+        }
         // Points come only from the point rows and columns; the margin around them
         // still counts as inside the region for border detection.
         let mut margin = new_map();

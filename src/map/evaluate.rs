@@ -13,8 +13,8 @@ use rayon::prelude::*;
 /// Fills the same-direction surfel neighbourhoods from the node neighbourhoods.
 pub(crate) fn surfel_neighborhoods(map: &mut SurfelMap) {
     let n = map.surfels.len();
-    map.surfel_neighbors.clear();
-    map.surfel_neighbors.resize(n, [NONE; 27]);
+    // Every row is written below.
+    super::resize_for_overwrite(&mut map.surfel_neighbors, [NONE; 27], n);
     let (nodes, neighbors, surfels) = (&map.tree.nodes, &map.tree.neighbors, &map.surfels);
     map.surfel_neighbors.par_chunks_mut(CHUNK).enumerate().for_each(|(c, out)| {
         for (k, row) in out.iter_mut().enumerate() {

@@ -140,13 +140,22 @@ impl SurfelMap {
 
     /// Removes every node and surfel, keeping the storage.
     pub fn clear(&mut self) {
+        self.clear_for_rebuild();
+        self.tree.neighbors.clear();
+        self.descriptors.clear();
+        self.surfel_neighbors.clear();
+    }
+
+    /// Removes every node and surfel before the map is assembled anew, keeping as scratch
+    /// the tables that assembly writes in full, row by row (node and surfel neighbourhoods,
+    /// descriptors): it sizes them with [`resize_for_overwrite`], so that the rows an
+    /// earlier map left are not filled only to be overwritten (megabytes per VGA frame).
+    pub(crate) fn clear_for_rebuild(&mut self) {
         self.tree.clear(self.params.num_levels);
         self.stats.clear();
         self.surfels.clear();
         self.normals.clear();
         self.view_dirs.clear();
-        self.descriptors.clear();
-        self.surfel_neighbors.clear();
     }
 
     /// The parameters the map was built with.
@@ -281,6 +290,13 @@ impl SurfelMap {
         }
         out
     }
+}
+
+/// Makes `v` hold `n` entries for a pass that writes every one of them before anything
+/// reads it: entries kept from before are not written twice (`value` fills only growth).
+pub(crate) fn resize_for_overwrite<T: Clone>(v: &mut Vec<T>, value: T, n: usize) {
+    v.truncate(n);
+    v.resize(n, value);
 }
 
 #[cfg(test)]

@@ -196,9 +196,10 @@ impl NodeArena {
         }
     }
 
+    /// Removes every node. The neighbour table keeps its rows as scratch: see
+    /// [`NodeArena::establish_neighbors`].
     pub(crate) fn clear(&mut self, num_levels: usize) {
         self.nodes.clear();
-        self.neighbors.clear();
         self.level_start = [0; MAX_LEVELS];
         self.level_end = [0; MAX_LEVELS];
         self.num_levels = num_levels;
@@ -332,8 +333,8 @@ impl NodeArena {
     /// the coarsest level by hash look-ups, every finer level from its parent's
     /// neighbours' children; within a level in parallel (each node writes its own row).
     pub(crate) fn establish_neighbors(&mut self) {
-        self.neighbors.clear();
-        self.neighbors.resize(self.nodes.len(), [NONE; 27]);
+        // Every row is written below (the levels' ranges cover all nodes).
+        super::resize_for_overwrite(&mut self.neighbors, [NONE; 27], self.nodes.len());
         let top = self.top_level();
         let (start, end) = (self.level_start[top] as usize, self.level_end[top] as usize);
         let (nodes, hash) = (&self.nodes, &self.top);
