@@ -4,7 +4,7 @@
 
 use super::aggregate::{Aggregate, Band};
 use super::descriptor::{DESCRIPTOR_LEN, Descriptor, compute_descriptors};
-use super::evaluate::{CHUNK, RawMoments, estimate_normals, evaluate_statistics, surfel_neighborhoods};
+use super::evaluate::{CHUNK, RawMoments, estimate_normals, evaluate_beside_neighbors, surfel_neighborhoods};
 use super::params::MAX_LEVELS;
 use super::radix::{Coded, sort_by_code};
 use super::stats::SurfelStats;
@@ -58,14 +58,13 @@ impl Assembly {
         let surfels = assign_surfels(map);
         self.insert_aggregates(bands, map);
         merge_bottom_up(map);
-        map.tree.establish_neighbors();
-        surfel_neighborhoods(map);
-        // §3.1 evaluation, normals; §3.2 descriptors.
+        // §3.1 evaluation beside the neighbourhoods, normals; §3.2 descriptors.
         // Per-surfel scratch and descriptors are only sized here: every entry is written
         // before it is read, so what an earlier frame left in them does not matter.
         let n = map.surfels.len();
         resize_for_overwrite(&mut self.raw, RawMoments::default(), n);
-        evaluate_statistics(map, &mut self.raw);
+        evaluate_beside_neighbors(map, &mut self.raw);
+        surfel_neighborhoods(map);
         estimate_normals(map, &self.raw);
         resize_for_overwrite(&mut self.simple, [0.0; DESCRIPTOR_LEN], n);
         resize_for_overwrite(&mut map.descriptors, [0.0; DESCRIPTOR_LEN], n);

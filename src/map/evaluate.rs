@@ -89,23 +89,37 @@ fn covariance_is_proper(cov: &Matrix3<f64>) -> bool {
     e[2] > 1e-14 && e[1] > 1e-6 * e[2] && e[0] > -1e-9 * e[2]
 }
 
+/// The node neighbourhoods (for §3.2) and the evaluation of every surfel (§3.1) side by
+/// side: neither reads what the other writes, and on two cores the neighbourhoods'
+/// level-by-level passes, each small, leave the second core idle most of the time.
+/// Each pass writes only its own entries, so the result does not depend on the threads.
+pub(crate) fn evaluate_beside_neighbors(map: &mut SurfelMap, raw: &mut [RawMoments]) {
+    let params = map.params;
+    let (fill, nodes) = map.tree.neighbor_fill();
+    let (stats, surfels) = (&map.stats[..], &mut map.surfels[..]);
+    rayon::join(|| fill.run(), || evaluate_statistics(&params, nodes, stats, surfels, raw));
+}
+
 /// Mean, covariance, colour, count and validity of every surfel, plus the raw moments
 /// used for normal smoothing.
-pub(crate) fn evaluate_statistics(map: &mut SurfelMap, raw: &mut [RawMoments]) {
-    let params = map.params;
-    let nodes = &map.tree.nodes;
-    let stats = &map.stats;
+fn evaluate_statistics(
+    params: &MapParams,
+    nodes: &[Node],
+    stats: &[SurfelStats],
+    surfels: &mut [Surfel],
+    raw: &mut [RawMoments],
+) {
     let thresholds = params.level_thresholds_r2();
     let top = params.num_levels - 1;
-    map.surfels.par_chunks_mut(CHUNK).zip(raw.par_chunks_mut(CHUNK)).enumerate().for_each(|(c, (surfels, raw))| {
+    surfels.par_chunks_mut(CHUNK).zip(raw.par_chunks_mut(CHUNK)).enumerate().for_each(|(c, (surfels, raw))| {
         for (k, (s, r)) in surfels.iter_mut().zip(raw.iter_mut()).enumerate() {
             let st = &stats[c * CHUNK + k];
             *r = RawMoments::of(st);
             let node = &nodes[s.node as usize];
-            evaluate_one(&params, node, st, s);
+            evaluate_one(params, node, st, s);
             if params.exclude_level_boundaries
                 && (node.level as usize) < top
-                && cut_by_level_range(&params, node, &thresholds)
+                && cut_by_level_range(params, node, &thresholds)
             {
                 s.excluded = true;
                 s.usable = false;

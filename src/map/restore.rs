@@ -3,7 +3,7 @@
 //! evaluated surfels, normals, descriptors — is recomputed.
 
 use super::descriptor::DESCRIPTOR_LEN;
-use super::evaluate::{RawMoments, estimate_normals, evaluate_statistics, surfel_neighborhoods};
+use super::evaluate::{RawMoments, estimate_normals, evaluate_beside_neighbors, surfel_neighborhoods};
 use super::params::{MAX_LEVELS, MapParams};
 use super::stats::SurfelStats;
 use super::tree::{NONE, Node, NodeArena, octant};
@@ -99,10 +99,9 @@ impl SurfelMap {
         map.normals = vec![nalgebra::Vector3::zeros(); s];
         map.stats = parts.stats;
         map.view_dirs = parts.view_dirs;
-        map.tree.establish_neighbors();
-        surfel_neighborhoods(&mut map);
         let mut raw = vec![RawMoments::default(); s];
-        evaluate_statistics(&mut map, &mut raw);
+        evaluate_beside_neighbors(&mut map, &mut raw);
+        surfel_neighborhoods(&mut map);
         estimate_normals(&mut map, &raw);
         let mut simple = vec![[0.0; DESCRIPTOR_LEN]; s];
         map.descriptors = vec![[0.0; DESCRIPTOR_LEN]; s];

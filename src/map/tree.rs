@@ -197,7 +197,7 @@ impl NodeArena {
     }
 
     /// Removes every node. The neighbour table keeps its rows as scratch: see
-    /// [`NodeArena::establish_neighbors`].
+    /// [`NeighborFill::run`].
     pub(crate) fn clear(&mut self, num_levels: usize) {
         self.nodes.clear();
         self.level_start = [0; MAX_LEVELS];
@@ -329,16 +329,37 @@ impl NodeArena {
         Some(node)
     }
 
+    /// The neighbour table to fill, apart from the nodes, which stay readable meanwhile
+    /// (e.g. to evaluate the surfels while the table is filled).
+    pub(crate) fn neighbor_fill(&mut self) -> (NeighborFill<'_>, &[Node]) {
+        let NodeArena { nodes, neighbors, level_start, level_end, num_levels, top, .. } = self;
+        let nodes: &[Node] = nodes;
+        let fill = NeighborFill { nodes, hash: top, level_start, level_end, top_level: *num_levels - 1, neighbors };
+        (fill, nodes)
+    }
+}
+
+/// What filling the neighbour table reads (the nodes, the coarsest level's hash, the
+/// levels' ranges) and writes (the table).
+pub(crate) struct NeighborFill<'a> {
+    nodes: &'a [Node],
+    hash: &'a CellHash,
+    level_start: &'a [u32; MAX_LEVELS],
+    level_end: &'a [u32; MAX_LEVELS],
+    top_level: usize,
+    neighbors: &'a mut Vec<[u32; 27]>,
+}
+
+impl NeighborFill<'_> {
     /// Fills the 27-neighbourhood of every node (same level only), coarsest level first:
     /// the coarsest level by hash look-ups, every finer level from its parent's
     /// neighbours' children; within a level in parallel (each node writes its own row).
-    pub(crate) fn establish_neighbors(&mut self) {
+    pub(crate) fn run(self) {
+        let NeighborFill { nodes, hash, level_start, level_end, top_level: top, neighbors } = self;
         // Every row is written below (the levels' ranges cover all nodes).
-        super::resize_for_overwrite(&mut self.neighbors, [NONE; 27], self.nodes.len());
-        let top = self.top_level();
-        let (start, end) = (self.level_start[top] as usize, self.level_end[top] as usize);
-        let (nodes, hash) = (&self.nodes, &self.top);
-        self.neighbors[start..end].par_chunks_mut(NEIGHBOR_CHUNK).enumerate().for_each(|(c, out)| {
+        super::resize_for_overwrite(neighbors, [NONE; 27], nodes.len());
+        let (start, end) = (level_start[top] as usize, level_end[top] as usize);
+        neighbors[start..end].par_chunks_mut(NEIGHBOR_CHUNK).enumerate().for_each(|(c, out)| {
             for (k, nb) in out.iter_mut().enumerate() {
                 let key = nodes[start + c * NEIGHBOR_CHUNK + k].key;
                 for (slot, d) in nb.iter_mut().zip(&NEIGHBOR_OFFSETS) {
@@ -347,9 +368,8 @@ impl NodeArena {
             }
         });
         for level in (0..top).rev() {
-            let (start, end) = (self.level_start[level] as usize, self.level_end[level] as usize);
-            let (coarser, this) = self.neighbors.split_at_mut(start);
-            let nodes = &self.nodes;
+            let (start, end) = (level_start[level] as usize, level_end[level] as usize);
+            let (coarser, this) = neighbors.split_at_mut(start);
             this[..end - start].par_chunks_mut(NEIGHBOR_CHUNK).enumerate().for_each(|(c, out)| {
                 for (k, nb) in out.iter_mut().enumerate() {
                     *nb = neighbors_from_parent(nodes, coarser, start + c * NEIGHBOR_CHUNK + k);
@@ -359,7 +379,7 @@ impl NodeArena {
     }
 }
 
-/// Nodes per parallel work item of [`NodeArena::establish_neighbors`] (each node's
+/// Nodes per parallel work item of [`NeighborFill::run`] (each node's
 /// result depends only on the coarser level, so any split gives the same table).
 const NEIGHBOR_CHUNK: usize = 256;
 
@@ -444,7 +464,7 @@ mod tests {
             }
             arena.close_level(level);
         }
-        arena.establish_neighbors();
+        arena.neighbor_fill().0.run();
         for (i, node) in arena.nodes.iter().enumerate() {
             for dx in -1..=1 {
                 for dy in -1..=1 {
