@@ -4,7 +4,7 @@
 
 use super::image_msg::{ImageHolder, MessageKind, decode_calibration, decode_image, to_depth16, to_rgb8};
 use super::mcap_source::{McapSource, ReadMode};
-use crate::frame::RgbdFrame;
+use crate::frame::{OwnedFrame, RgbdFrame};
 use crate::geometry::CameraModel;
 use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
@@ -230,6 +230,17 @@ impl RecordingReader {
                 return Ok(None);
             }
         }
+    }
+
+    /// [`Self::next_frame`] into `out`, without copying: the frame's buffers are swapped
+    /// with `out`'s, which the reader then reuses for later images. `Ok(false)` at the
+    /// end of the recording or at damage.
+    pub fn next_frame_into(&mut self, out: &mut OwnedFrame) -> Result<bool, RecordingError> {
+        let Some(frame) = self.next_frame()? else { return Ok(false) };
+        (out.stamp_ns, out.camera) = (frame.stamp_ns, Some(frame.camera));
+        std::mem::swap(&mut out.rgb, &mut self.frame_rgb);
+        std::mem::swap(&mut out.depth, &mut self.frame_depth);
+        Ok(true)
     }
 
     /// Pairs the oldest waiting colour and depth images (nearest stamps, within the
