@@ -149,7 +149,7 @@ impl SurfelMap {
     /// Removes every node and surfel before the map is assembled anew, keeping as scratch
     /// the tables that assembly writes in full, row by row (node and surfel neighbourhoods,
     /// descriptors): it sizes them with [`resize_for_overwrite`], so that the rows an
-    /// earlier map left are not filled only to be overwritten (megabytes per VGA frame).
+    /// earlier map left are not filled only to be overwritten (~1.3 MB per VGA frame).
     pub(crate) fn clear_for_rebuild(&mut self) {
         self.tree.clear(self.params.num_levels);
         self.stats.clear();
