@@ -95,7 +95,8 @@ impl Indexed {
         IndexedReaderOptions::new().include_topics(topics.iter().cloned()).with_record_length_limit(MAX_RECORD_BYTES)
     }
 
-    fn next(&mut self, payload: &mut Vec<u8>) -> Next {
+    /// The next message, handed to `visit` while the reader lends its bytes.
+    fn next<R>(&mut self, visit: &mut impl FnMut(RawMessage<'_>) -> R) -> Next<R> {
         loop {
             match self.reader.next_event()? {
                 Err(e) => return Some(Err(e)),
@@ -127,9 +128,11 @@ impl Indexed {
                         self.delivered_at_last.clear();
                     }
                     self.delivered_at_last.push(key);
-                    payload.clear();
-                    payload.extend_from_slice(data);
-                    return Some(Ok((channel.clone(), header.log_time)));
+                    return Some(Ok(visit(RawMessage {
+                        channel: channel.clone(),
+                        log_time_ns: header.log_time,
+                        data,
+                    })));
                 }
             }
         }
@@ -290,12 +293,26 @@ impl McapSource {
     /// damaged and cannot be read further (after which the source is finished). In
     /// indexed reading a damaged chunk is skipped ([`Self::skipped_chunks`]) instead.
     pub fn next_message(&mut self) -> Option<Result<RawMessage<'_>, McapError>> {
+        let mut payload = std::mem::take(&mut self.payload);
+        let next = self.next_message_with(|m| {
+            payload.clear();
+            payload.extend_from_slice(m.data);
+            (m.channel, m.log_time_ns)
+        });
+        self.payload = payload;
+        next.map(|r| r.map(|(channel, log_time_ns)| RawMessage { channel, log_time_ns, data: &self.payload }))
+    }
+
+    /// [`Self::next_message`], handed to `visit` (called once, with the message) and
+    /// without a copy where the file is read through its index: the message's bytes are
+    /// those of the decompressed chunk, lent for the call.
+    pub fn next_message_with<R>(&mut self, mut visit: impl FnMut(RawMessage<'_>) -> R) -> Option<Result<R, McapError>> {
         if self.done {
             return None;
         }
         let next = match &mut self.source {
             Source::Indexed(indexed) => loop {
-                match indexed.next(&mut self.payload) {
+                match indexed.next(&mut visit) {
                     Some(Err(e)) => {
                         let offset = indexed.requested.last().copied().unwrap_or(0);
                         self.skipped.push(format!("chunk at byte {offset}: {e}"));
@@ -307,10 +324,10 @@ impl McapSource {
                     other => break other,
                 }
             },
-            Source::Streamed { reader, topics } => next_streamed(reader, topics, &mut self.payload),
+            Source::Streamed { reader, topics } => next_streamed(reader, topics, &mut visit),
         };
         match next {
-            Some(Ok((channel, log_time_ns))) => Some(Ok(RawMessage { channel, log_time_ns, data: &self.payload })),
+            Some(Ok(r)) => Some(Ok(r)),
             Some(Err(e)) => {
                 self.done = true;
                 Some(Err(e))
@@ -323,19 +340,22 @@ impl McapSource {
     }
 }
 
-type Next = Option<Result<(Arc<Channel<'static>>, u64), McapError>>;
+type Next<R> = Option<Result<R, McapError>>;
 
-fn next_streamed(
+fn next_streamed<R>(
     reader: &mut mcap::io::MessageReader<BufReader<File>>,
     topics: &[String],
-    payload: &mut Vec<u8>,
-) -> Next {
+    visit: &mut impl FnMut(RawMessage<'_>) -> R,
+) -> Next<R> {
     loop {
         match reader.next()? {
             Err(e) => return Some(Err(e)),
             Ok(message) if topics.iter().any(|t| *t == message.channel.topic) => {
-                *payload = message.data.into_owned();
-                return Some(Ok((message.channel, message.log_time)));
+                return Some(Ok(visit(RawMessage {
+                    channel: message.channel,
+                    log_time_ns: message.log_time,
+                    data: &message.data,
+                })));
             }
             Ok(_) => {}
         }

@@ -3,7 +3,7 @@
 //! calibration message. Buffers are reused from frame to frame.
 
 use super::image_msg::{ImageHolder, MessageKind, decode_calibration, decode_image, to_depth16, to_rgb8};
-use super::mcap_source::{McapSource, ReadMode};
+use super::mcap_source::{McapSource, RawMessage, ReadMode};
 use crate::frame::{OwnedFrame, RgbdFrame};
 use crate::geometry::CameraModel;
 use std::collections::VecDeque;
@@ -313,16 +313,35 @@ impl RecordingReader {
     }
 
     /// Reads and decodes one message of the chosen topics; `false` at the end or damage.
+    /// The message is decoded while the source lends its bytes (no copy of them).
     fn read_message(&mut self) -> Result<bool, RecordingError> {
         let read = self.stats.color + self.stats.depth + self.stats.camera_info;
-        let message = match self.source.next_message() {
-            None => return Ok(false),
+        let RecordingReader { source, topics, camera, color, depth, holder, stats, .. } = self;
+        let mut sink = Sink { topics, camera, color, depth, holder, stats };
+        match source.next_message_with(|message| sink.decode(message)) {
+            None => Ok(false),
             Some(Err(e)) => {
                 self.damage = Some(Damage { reason: e.to_string(), messages_before: read });
-                return Ok(false);
+                Ok(false)
             }
-            Some(Ok(m)) => m,
-        };
+            Some(Ok(decoded)) => decoded.map(|()| true),
+        }
+    }
+}
+
+/// Where a message's content goes: the calibration, or the queue of its images.
+struct Sink<'a> {
+    topics: &'a RecordingTopics,
+    camera: &'a mut Option<CameraModel>,
+    color: &'a mut Queue<u8>,
+    depth: &'a mut Queue<u16>,
+    holder: &'a mut ImageHolder,
+    stats: &'a mut RecordingStats,
+}
+
+impl Sink<'_> {
+    /// Decodes one message of the chosen topics (others are passed over).
+    fn decode(&mut self, message: RawMessage<'_>) -> Result<(), RecordingError> {
         let topic = message.channel.topic.as_str();
         let (role, counter) = if topic == self.topics.color {
             (Role::Color, &mut self.stats.color)
@@ -331,7 +350,7 @@ impl RecordingReader {
         } else if topic == self.topics.camera_info {
             (Role::CameraInfo, &mut self.stats.camera_info)
         } else {
-            return Ok(true);
+            return Ok(());
         };
         let index = *counter;
         *counter += 1;
@@ -349,11 +368,10 @@ impl RecordingReader {
         match role {
             Role::CameraInfo => {
                 let camera = decode_calibration(kind, message.data).map_err(|e| message_error(topic, index, e))?;
-                self.camera = Some(camera);
+                *self.camera = Some(camera);
             }
             Role::Color | Role::Depth => {
-                let view =
-                    decode_image(kind, message.data, &mut self.holder).map_err(|e| message_error(topic, index, e))?;
+                let view = decode_image(kind, message.data, self.holder).map_err(|e| message_error(topic, index, e))?;
                 let stamp_ns = if view.stamp_ns == 0 { message.log_time_ns } else { view.stamp_ns };
                 let (width, height) = (view.width, view.height);
                 let wanted_depth = matches!(role, Role::Depth);
@@ -364,16 +382,16 @@ impl RecordingReader {
                 let dropped = if wanted_depth {
                     let mut pixels = self.depth.buffer();
                     let depth_scale_m = to_depth16(&view, &mut pixels);
-                    push(&mut self.depth, Pending { stamp_ns, index, width, height, depth_scale_m, pixels })
+                    push(self.depth, Pending { stamp_ns, index, width, height, depth_scale_m, pixels })
                 } else {
                     let mut pixels = self.color.buffer();
                     to_rgb8(&view, &mut pixels);
-                    push(&mut self.color, Pending { stamp_ns, index, width, height, depth_scale_m: 0.0, pixels })
+                    push(self.color, Pending { stamp_ns, index, width, height, depth_scale_m: 0.0, pixels })
                 };
                 self.stats.unpaired += u64::from(dropped);
             }
         }
-        Ok(true)
+        Ok(())
     }
 }
 
