@@ -303,9 +303,9 @@ impl McapSource {
         next.map(|r| r.map(|(channel, log_time_ns)| RawMessage { channel, log_time_ns, data: &self.payload }))
     }
 
-    /// [`Self::next_message`], handed to `visit` (called once, with the message) and
-    /// without a copy where the file is read through its index: the message's bytes are
-    /// those of the decompressed chunk, lent for the call.
+    /// [`Self::next_message`], handed to `visit` (called once, with the message) without
+    /// a copy: the message's bytes are lent for the call (in indexed reading, those of the
+    /// decompressed chunk).
     pub fn next_message_with<R>(&mut self, mut visit: impl FnMut(RawMessage<'_>) -> R) -> Option<Result<R, McapError>> {
         if self.done {
             return None;
