@@ -206,10 +206,11 @@ pub fn to_depth16(image: &ImageView<'_>, out: &mut Vec<u16>) -> f64 {
     for row in image.data.chunks(image.step).take(image.height) {
         let row = &row[..image.width * bpp];
         match image.format {
-            PixelFormat::DepthMm16 => out.extend(row.chunks_exact(2).map(|b| {
-                let b = [b[0], b[1]];
-                if image.big_endian { u16::from_be_bytes(b) } else { u16::from_le_bytes(b) }
-            })),
+            // One loop per byte order, so that the usual one (little-endian) is a plain copy.
+            PixelFormat::DepthMm16 if image.big_endian => {
+                out.extend(row.chunks_exact(2).map(|b| u16::from_be_bytes([b[0], b[1]])))
+            }
+            PixelFormat::DepthMm16 => out.extend(row.chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]]))),
             PixelFormat::DepthM32 => out.extend(row.chunks_exact(4).map(|b| {
                 let b = [b[0], b[1], b[2], b[3]];
                 let metres = if image.big_endian { f32::from_be_bytes(b) } else { f32::from_le_bytes(b) };
