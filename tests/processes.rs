@@ -288,7 +288,7 @@ fn camera_replays_mcap_and_the_tracker_records_what_it_receives() {
     assert!(stdout.contains("8 frames paired") && stdout.contains("8 frames tracking"), "{stdout}");
     let mut poses = mrsmap::io::mcap_source::McapSource::open(&recorded, &["/mrsmap/teddy/pose"]).expect("opens");
     let mut count = 0;
-    while let Some(m) = poses.next_message() {
+    while let Some(m) = poses.next_message_with(|_| ()) {
         m.expect("pose message");
         count += 1;
     }

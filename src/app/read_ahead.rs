@@ -33,23 +33,22 @@ impl ReadAhead {
         let thread = std::thread::Builder::new().name("mrsmap-read-ahead".into()).spawn(move || {
             loop {
                 let mut owned = recycled.try_recv().unwrap_or_default();
-                let next = if half {
-                    match reader.next_frame() {
-                        Ok(Some(f)) => {
+                let read = if half {
+                    reader.next_frame().map(|f| {
+                        f.map(|f| {
                             owned.stamp_ns = f.stamp_ns;
                             owned.camera = halve(&f, &mut owned.rgb, &mut owned.depth).ok().map(|h| h.camera);
-                            Ok(owned)
-                        }
-                        Ok(None) => break,
-                        Err(e) => Err(e),
-                    }
+                        })
+                        .is_some()
+                    })
                 } else {
                     // The frame's buffers change hands (no copy of the images).
-                    match reader.next_frame_into(&mut owned) {
-                        Ok(true) => Ok(owned),
-                        Ok(false) => break,
-                        Err(e) => Err(e),
-                    }
+                    reader.next_frame_into(&mut owned)
+                };
+                let next = match read {
+                    Ok(true) => Ok(owned),
+                    Ok(false) => break,
+                    Err(e) => Err(e),
                 };
                 let stop = next.is_err();
                 if tx.send(next).is_err() || stop {

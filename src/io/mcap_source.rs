@@ -30,7 +30,7 @@ pub enum ReadMode {
     Streamed,
 }
 
-/// One message: its channel, log time, and payload (valid until the next call).
+/// One message: its channel, log time, and payload (lent for one call).
 #[derive(Debug)]
 pub struct RawMessage<'a> {
     /// The channel (topic, schema, encoding).
@@ -206,7 +206,6 @@ pub struct McapSource {
     mode: ReadMode,
     counts: HashMap<String, u64>,
     skipped: Vec<String>,
-    payload: Vec<u8>,
     done: bool,
 }
 
@@ -271,7 +270,7 @@ impl McapSource {
             Source::Indexed(_) => ReadMode::Indexed,
             Source::Streamed { .. } => ReadMode::Streamed,
         };
-        Ok(McapSource { source, mode, counts, skipped: Vec::new(), payload: Vec::new(), done: false })
+        Ok(McapSource { source, mode, counts, skipped: Vec::new(), done: false })
     }
 
     /// How the file is read.
@@ -289,23 +288,11 @@ impl McapSource {
         &self.skipped
     }
 
-    /// The next message of a chosen topic; `None` at the end; an error where the file is
-    /// damaged and cannot be read further (after which the source is finished). In
-    /// indexed reading a damaged chunk is skipped ([`Self::skipped_chunks`]) instead.
-    pub fn next_message(&mut self) -> Option<Result<RawMessage<'_>, McapError>> {
-        let mut payload = std::mem::take(&mut self.payload);
-        let next = self.next_message_with(|m| {
-            payload.clear();
-            payload.extend_from_slice(m.data);
-            (m.channel, m.log_time_ns)
-        });
-        self.payload = payload;
-        next.map(|r| r.map(|(channel, log_time_ns)| RawMessage { channel, log_time_ns, data: &self.payload }))
-    }
-
-    /// [`Self::next_message`], handed to `visit` (called once, with the message) without
-    /// a copy: the message's bytes are lent for the call (in indexed reading, those of the
-    /// decompressed chunk).
+    /// The next message of a chosen topic, handed to `visit` (called once, with the
+    /// message) without a copy: its bytes are lent for the call (in indexed reading, those
+    /// of the decompressed chunk). `None` at the end; an error where the file is damaged
+    /// and cannot be read further (after which the source is finished). In indexed
+    /// reading a damaged chunk is skipped ([`Self::skipped_chunks`]) instead.
     pub fn next_message_with<R>(&mut self, mut visit: impl FnMut(RawMessage<'_>) -> R) -> Option<Result<R, McapError>> {
         if self.done {
             return None;
@@ -405,10 +392,10 @@ mod tests {
         let mut source = McapSource::open(path, &["/t"]).expect("opens");
         assert_eq!(source.mode(), ReadMode::Indexed);
         let mut times = Vec::new();
-        while let Some(message) = source.next_message() {
-            let message = message.expect("intact chunks read");
-            assert_eq!(message.data, message.log_time_ns.to_le_bytes(), "payload of {}", message.log_time_ns);
-            times.push(message.log_time_ns);
+        while let Some(message) = source.next_message_with(|m| (m.log_time_ns, m.data.to_vec())) {
+            let (log_time_ns, data) = message.expect("intact chunks read");
+            assert_eq!(data, log_time_ns.to_le_bytes(), "payload of {log_time_ns}");
+            times.push(log_time_ns);
         }
         (times, source.skipped_chunks().len())
     }
@@ -424,9 +411,9 @@ mod tests {
         std::fs::write(&path, &bytes).expect("write");
         let mut source = McapSource::open(&path, &["/t"]).expect("opens");
         assert_eq!(source.mode(), ReadMode::Streamed);
-        let e = source.next_message().expect("an event").expect_err("damaged");
+        let e = source.next_message_with(|_| ()).expect("an event").expect_err("damaged");
         assert!(e.to_string().to_lowercase().contains("too large") || e.to_string().contains("length"), "{e}");
-        assert!(source.next_message().is_none());
+        assert!(source.next_message_with(|_| ()).is_none());
         let _ = std::fs::remove_file(&path);
     }
 
