@@ -332,9 +332,10 @@ impl NodeArena {
     /// The neighbour table to fill, apart from the nodes, which stay readable meanwhile
     /// (e.g. to evaluate the surfels while the table is filled).
     pub(crate) fn neighbor_fill(&mut self) -> (NeighborFill<'_>, &[Node]) {
-        let NodeArena { nodes, neighbors, level_start, level_end, num_levels, top, .. } = self;
+        let top_level = self.top_level();
+        let NodeArena { nodes, neighbors, level_start, level_end, top, .. } = self;
         let nodes: &[Node] = nodes;
-        let fill = NeighborFill { nodes, hash: top, level_start, level_end, top_level: *num_levels - 1, neighbors };
+        let fill = NeighborFill { nodes, hash: top, level_start, level_end, top_level, neighbors };
         (fill, nodes)
     }
 }
