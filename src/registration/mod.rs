@@ -263,6 +263,13 @@ impl Solver<'_> {
                 }
                 return Ok((it, true));
             }
+            if small && p.test_small_steps_first && !self.gains_at(&candidate, sys.cost, predicted, interpolate) {
+                // A small step that the current associations already reject: skip the
+                // search from scratch at the candidate (see `gains_at`).
+                fresh = true;
+                sys = self.associate_enough(fresh, Sum::LmSystem, interpolate)?;
+                continue;
+            }
             // Re-associate at the candidate (from scratch after a small step), summing the
             // current associations' cost there for the gain ratio.
             self.ws.assoc_backup.copy_from_slice(&self.ws.assoc);
@@ -298,6 +305,18 @@ impl Solver<'_> {
             }
         }
         Ok((p.lm_max_iterations, false))
+    }
+
+    /// Whether a step to `candidate` would pass the gain-ratio test: the cost of the
+    /// current associations there (one sum over them, no search) below `cost` by a
+    /// positive fraction of the `predicted` decrease. The re-association at the candidate
+    /// sums the same cost and tests the same ratio; after a small step it searches every
+    /// match from scratch, the costliest sweep of all, and at the noise floor such steps
+    /// are often rejected (a third of them in tracking): with
+    /// `RegistrationParams::test_small_steps_first`, the sum decides first.
+    fn gains_at(&mut self, candidate: &Pose, cost: f64, predicted: f64, interpolate: bool) -> bool {
+        let at = self.sum_at(candidate, Sum::LmCost, interpolate).cost;
+        (cost - at) / predicted > 0.0 && at.is_finite() && is_finite(candidate)
     }
 
     /// Newton's method on the log-likelihood Eq. (4) with interpolation, starting from

@@ -60,6 +60,15 @@ pub struct RegistrationParams {
     /// slightly worse (docs/benchmarks.md, stop 27): a tracker, which searches afresh at
     /// every frame anyway, may choose that.
     pub confirm_with_fresh_associations: bool,
+    /// Before a small step's re-association, which searches every match afresh at the
+    /// candidate, test the step's gain ratio on the current associations (one sum over
+    /// them): the test the re-association makes, on the same terms summed in another
+    /// order — only a gain that rounds to zero could be judged differently; every run
+    /// measured gives the same results bit for bit (`tests/real_frames.rs`). It saves the
+    /// search where the step is rejected and costs the sum where it is accepted:
+    /// registration −3.5 % instructions in VGA tracking, −4.4 % QVGA, but +1.3 % in VGA
+    /// odometry (docs/benchmarks.md, stop 32). On for the tracker.
+    pub test_small_steps_first: bool,
     /// Interpolate model surfels trilinearly in the Newton stage (§4.3).
     pub interpolate: bool,
     /// Interpolate model surfels in the LM stage as well. The original does not; without
@@ -99,6 +108,7 @@ impl Default for RegistrationParams {
             step_tolerance_m: 5e-4,
             step_tolerance_rad: 5e-4,
             confirm_with_fresh_associations: true,
+            test_small_steps_first: false,
             interpolate: true,
             interpolate_lm: true,
             min_associations: 30,

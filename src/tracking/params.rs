@@ -48,6 +48,9 @@ impl Default for TrackerParams {
                 // accuracy (~7 mm) this saves 18 % of registration work (docs/benchmarks.md).
                 step_tolerance_m: 2e-3,
                 step_tolerance_rad: 2e-3,
+                // The tracker's small steps are often rejected: test them before the
+                // search from scratch (same results, −3.5 % registration instructions).
+                test_small_steps_first: true,
                 ..RegistrationParams::default()
             },
             gate_mahalanobis2: 12.0,
