@@ -67,7 +67,8 @@ pub struct RegistrationParams {
     /// measured gives the same results bit for bit (`tests/real_frames.rs`). It saves the
     /// search where the step is rejected and costs the sum where it is accepted:
     /// registration −3.5 % instructions in VGA tracking, −4.4 % QVGA, but +1.3 % in VGA
-    /// odometry (docs/benchmarks.md, stop 32). On for the tracker.
+    /// odometry (docs/benchmarks.md, stop 32). On for the tracker. (A step right after a
+    /// rejected one is always tested first: most of those are rejected again.)
     pub test_small_steps_first: bool,
     /// Interpolate model surfels trilinearly in the Newton stage (§4.3).
     pub interpolate: bool,
