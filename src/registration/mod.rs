@@ -258,8 +258,7 @@ impl Solver<'_> {
             }
             if small && (fresh || !p.confirm_with_fresh_associations) {
                 // The last step: only its cost is needed, no new associations.
-                let cost = self.sum_at(&candidate, Sum::LmCost, interpolate).cost;
-                if (sys.cost - cost) / predicted > 0.0 && cost.is_finite() && is_finite(&candidate) {
+                if self.gains_at(&candidate, sys.cost, predicted, interpolate) {
                     self.pose = candidate;
                 }
                 return Ok((it, true));
@@ -309,11 +308,12 @@ impl Solver<'_> {
         Ok((p.lm_max_iterations, false))
     }
 
-    /// Whether a step to `candidate` would pass the gain-ratio test: the cost of the
-    /// current associations there (one sum over them, no search) below `cost` by a
-    /// positive fraction of the `predicted` decrease. The re-association at the candidate
-    /// sums the same terms (in another order) for the same test, but costs a search per
-    /// scene node — from scratch after a small step, the costliest sweep of all. At the
+    /// Whether a step to `candidate` passes the gain-ratio test: the cost of the current
+    /// associations there (one sum over them, no search) below `cost` by a positive
+    /// fraction of the `predicted` decrease. It decides LM's last step; before another
+    /// step it can go first, ahead of the re-association at the candidate, which sums the
+    /// same terms (in another order) for the same test but costs a search per scene
+    /// node — from scratch after a small step, the costliest sweep of all. At the
     /// noise floor small steps are often rejected (a third of them in tracking, where
     /// `RegistrationParams::test_small_steps_first` is on), and steps right after a
     /// rejection mostly are (15 of 17 in tracking, 7 of 8 in odometry, fr3_teddy).
