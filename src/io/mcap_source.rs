@@ -313,17 +313,11 @@ impl McapSource {
             },
             Source::Streamed { reader, topics } => next_streamed(reader, topics, &mut visit),
         };
-        match next {
-            Some(Ok(r)) => Some(Ok(r)),
-            Some(Err(e)) => {
-                self.done = true;
-                Some(Err(e))
-            }
-            None => {
-                self.done = true;
-                None
-            }
+        // The end, or damage that cannot be read past: the source is finished.
+        if !matches!(next, Some(Ok(_))) {
+            self.done = true;
         }
+        next
     }
 }
 
