@@ -335,7 +335,7 @@ impl Search<'_> {
     }
 
     /// Tests the usable surfels of model node `m` (not `NONE`) against the node's.
-    #[inline]
+    #[inline(always)]
     fn test(&mut self, m: u32) {
         let (model, scene) = (self.input.terms.model, self.input.terms.scene);
         let p = self.input.params;
