@@ -337,26 +337,16 @@ impl Search<'_> {
     /// Tests the usable surfels of model node `m` (not `NONE`) against the node's.
     #[inline(always)]
     fn test(&mut self, m: u32) {
-        let (model, scene) = (self.input.terms.model, self.input.terms.scene);
-        let p = self.input.params;
+        let model = self.input.terms.model;
         let mnode = &model.nodes()[m as usize];
-        if p.match_contours && mnode.border != self.node.border {
+        if self.input.params.match_contours && mnode.border != self.node.border {
             return;
         }
         for &(s, _, mu) in self.transformed {
-            let sf = &scene.surfels()[s as usize];
-            let Some(ms) = self
-                .input
-                .dirs
-                .of(sf.dir)
-                .iter()
-                .map(|&k| mnode.surfels[k as usize])
-                .find(|&ms| ms != NONE && model.surfels()[ms as usize].usable())
-            else {
+            let Some(ms) = self.candidate(mnode, s) else {
                 continue;
             };
-            let msf = &model.surfels()[ms as usize];
-            let dist2 = (msf.mean.cast::<f64>() - mu).norm_squared();
+            let dist2 = (model.surfels()[ms as usize].mean.cast::<f64>() - mu).norm_squared();
             if dist2 >= self.second {
                 continue;
             }
@@ -366,16 +356,7 @@ impl Search<'_> {
                 self.second = dist2;
                 continue;
             }
-            if p.use_color {
-                let dc = msf.color - sf.color;
-                if dc.x.abs() > p.luminance_gate || dc.y.abs() > p.chroma_gate || dc.z.abs() > p.chroma_gate {
-                    continue;
-                }
-            }
-            if p.use_descriptors
-                && descriptor_distance2(&model.descriptors()[ms as usize], &scene.descriptors()[s as usize])
-                    > p.descriptor_gate
-            {
+            if !self.passes_gates(s, ms) {
                 continue;
             }
             if dist2 < self.best {
@@ -392,6 +373,67 @@ impl Search<'_> {
                 self.second = dist2;
             }
         }
+    }
+
+    /// The model surfel of node `mnode` that scene surfel `s` is compared with: the
+    /// first usable one among the view directions within the angle gate, best first.
+    #[inline(always)]
+    fn candidate(&self, mnode: &Node, s: u32) -> Option<u32> {
+        let model = self.input.terms.model;
+        let dir = self.input.terms.scene.surfels()[s as usize].dir;
+        self.input
+            .dirs
+            .of(dir)
+            .iter()
+            .map(|&k| mnode.surfels[k as usize])
+            .find(|&ms| ms != NONE && model.surfels()[ms as usize].usable())
+    }
+
+    /// The pose-independent gates of a pair: colour and descriptor distance.
+    #[inline(always)]
+    fn passes_gates(&self, s: u32, ms: u32) -> bool {
+        let (model, scene) = (self.input.terms.model, self.input.terms.scene);
+        let p = self.input.params;
+        let (sf, msf) = (&scene.surfels()[s as usize], &model.surfels()[ms as usize]);
+        if p.use_color {
+            let dc = msf.color - sf.color;
+            if dc.x.abs() > p.luminance_gate || dc.y.abs() > p.chroma_gate || dc.z.abs() > p.chroma_gate {
+                return false;
+            }
+        }
+        !p.use_descriptors
+            || descriptor_distance2(&model.descriptors()[ms as usize], &scene.descriptors()[s as usize])
+                <= p.descriptor_gate
+    }
+
+    /// After a cube search without a match: `second` becomes the smallest squared
+    /// distance of any candidate of the cube that passes the pose-independent gates
+    /// (all lie beyond the radius; infinite if there is none), so that the result can be
+    /// reused until one of them could come within the radius. The search itself bounds
+    /// the cells it skipped by their slab bound and candidates beyond the radius without
+    /// their gates: a bound just beyond the radius, which the next step outruns, while
+    /// most candidates near a node without a match fail the gates.
+    fn bound_without_match(&mut self, cells: &CubeCells, n: [usize; 3]) {
+        let model = self.input.terms.model;
+        let mut second = f64::INFINITY;
+        for j in (0..n[0]).flat_map(|a| (0..n[1]).flat_map(move |b| (0..n[2]).map(move |c| [a, b, c]))) {
+            let Some(m) = cells.get(j) else {
+                continue;
+            };
+            let mnode = &model.nodes()[m as usize];
+            if self.input.params.match_contours && mnode.border != self.node.border {
+                continue;
+            }
+            for &(s, _, mu) in self.transformed {
+                if let Some(ms) = self.candidate(mnode, s) {
+                    let dist2 = (model.surfels()[ms as usize].mean.cast::<f64>() - mu).norm_squared();
+                    if dist2 < second && self.passes_gates(s, ms) {
+                        second = dist2;
+                    }
+                }
+            }
+        }
+        self.second = second;
     }
 }
 
@@ -527,5 +569,8 @@ impl Search<'_> {
                 m.map(|m| (m, [lo[0] + j[0] as i32, lo[1] + j[1] as i32, lo[2] + j[2] as i32]))
             },
         );
+        if !self.found.is_matched() {
+            self.bound_without_match(&cells, n);
+        }
     }
 }

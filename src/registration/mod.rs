@@ -16,6 +16,8 @@
 //! allocated here.
 
 mod associate;
+#[cfg(test)]
+mod associate_tests;
 mod cells;
 mod cost;
 mod evaluate;

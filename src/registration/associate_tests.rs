@@ -1,0 +1,108 @@
+//! Association's cache of search results is exact: a fresh pass after earlier passes
+//! (whose results it reuses where they provably still hold) pairs every scene node as
+//! a pass from scratch does.
+
+use super::associate::{AssociationInput, DirCandidates, associate};
+use super::evaluate::{Sum, SumInput, slot_offsets};
+use super::params::RegistrationParams;
+use super::workspace::{Association, Partial, PassState};
+use crate::frame::RgbdFrame;
+use crate::geometry::se3::compose_left;
+use crate::geometry::{CameraModel, NO_DISTORTION, PinholeIntrinsics, Pose};
+use crate::map::{MAX_LEVELS, MapBuilder, MapCapacity, MapParams, SurfelMap};
+use nalgebra::Vector6;
+
+const W: usize = 320;
+const H: usize = 240;
+
+/// A map of a slanted wall with a colour ramp. `scene`: a band painted another colour
+/// (its nodes find candidates nearby that fail the colour gate), and the left half
+/// 26 mm farther away (its finest nodes' candidates lie just beyond their search radius
+/// of 25 mm, until the steps bring them within).
+fn wall(scene: bool) -> SurfelMap {
+    let intrinsics = PinholeIntrinsics { fx: 268.0, fy: 270.0, cx: 160.0, cy: 124.0 };
+    let camera =
+        CameraModel { width: W as u32, height: H as u32, intrinsics, distortion: NO_DISTORTION, depth_scale_m: 0.0002 };
+    let far = |u: usize| if scene && u < W / 2 { 140 } else { 0 };
+    let depth: Vec<u16> = (0..W * H).map(|i| 3000 + far(i % W) + (i % W) as u16 * 3 + (i / W) as u16).collect();
+    let rgb: Vec<u8> = (0..W * H)
+        .flat_map(|i| {
+            let (u, v) = (i % W, i / W);
+            if scene && (200..260).contains(&u) { [20, 200, 40] } else { [(u / 2) as u8, 90, (v / 2) as u8] }
+        })
+        .collect();
+    let frame = RgbdFrame::new(0, camera, &rgb, &depth).expect("consistent frame");
+    let capacity = MapCapacity::for_image(W * H);
+    let mut map = SurfelMap::new(MapParams::default(), capacity).expect("valid parameters");
+    MapBuilder::new(W, H, capacity.surfels).build(&frame, &mut map).expect("builds");
+    map
+}
+
+/// The state association keeps between the passes of one registration.
+struct Passes {
+    assoc: Vec<Association>,
+    last_cube: Vec<Association>,
+    partials: Vec<Partial>,
+    passes: Vec<PassState>,
+}
+
+impl Passes {
+    fn new(scene: &SurfelMap, params: &RegistrationParams) -> Self {
+        let n = scene.nodes().len();
+        let slots = slot_offsets(scene, params.finest_level, params.coarsest_level)[MAX_LEVELS];
+        Passes {
+            assoc: vec![Association::NONE; n],
+            last_cube: vec![Association::NONE; n],
+            partials: vec![Partial::ZERO; slots],
+            passes: Vec::new(),
+        }
+    }
+
+    fn associate(&mut self, model: &SurfelMap, scene: &SurfelMap, pose: &Pose, fresh: bool) {
+        let params = RegistrationParams::default();
+        let terms = SumInput::new(model, scene, pose, &params, false);
+        let dirs = DirCandidates::new(pose, params.view_dir_min_cos);
+        let input = AssociationInput { terms: &terms, params: &params, dirs, model_contours: model.contour_levels() };
+        let state = (&mut self.assoc[..], &mut self.last_cube[..]);
+        associate(&input, state, &mut self.partials, &mut self.passes, fresh, Sum::LmCost, false);
+    }
+}
+
+#[test]
+fn a_fresh_pass_reusing_earlier_searches_pairs_as_a_pass_from_scratch() {
+    let (model, scene) = (wall(false), wall(true));
+    let params = RegistrationParams::default();
+    let mut poses = vec![Pose::identity()];
+    for k in 1..12 {
+        // Steps of 0.1–1 mm and mrad, as late in LM, and 1.5 mm towards the camera.
+        let s = 1e-4 * (1 + k % 10) as f64;
+        let step = Vector6::new(s, -0.5 * s, -1e-3, 0.2 * s, s, -0.4 * s);
+        poses.push(compose_left(&step, &poses[k - 1]));
+    }
+    let mut cached = Passes::new(&scene, &params);
+    let (mut fresh_passes, mut reused_without_match) = (0, 0);
+    for (k, pose) in poses.iter().enumerate() {
+        let fresh = k % 3 != 1;
+        cached.associate(&model, &scene, pose, fresh);
+        if !fresh {
+            continue;
+        }
+        let mut scratch = Passes::new(&scene, &params);
+        scratch.associate(&model, &scene, pose, true);
+        let pairs =
+            |p: &Passes| p.assoc.iter().map(|a| (a.covered, a.scene_surfel, a.model_surfel)).collect::<Vec<_>>();
+        assert_eq!(pairs(&cached), pairs(&scratch), "fresh pass {k}");
+        let this_pass = (cached.passes.len() - 1) as u16;
+        reused_without_match += cached
+            .assoc
+            .iter()
+            .filter(|a| !a.covered && a.valid_radius >= 0.0 && !a.is_matched() && a.pass < this_pass)
+            .count();
+        fresh_passes += 1;
+    }
+    let matched = cached.assoc.iter().filter(|a| a.is_matched()).count();
+    assert!(fresh_passes >= 7 && matched > 200, "{fresh_passes} fresh passes, {matched} matched");
+    // The recoloured band's nodes find candidates that fail the colour gate; their
+    // results without a match are reused while no candidate can come within the radius.
+    assert!(reused_without_match > 100, "{reused_without_match} results without a match reused");
+}
