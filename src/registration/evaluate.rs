@@ -25,6 +25,14 @@ pub(crate) enum Sum {
     LikelihoodSystem,
 }
 
+impl Sum {
+    /// Whether the sum reads the terms' Jacobians (a system does, a cost does not).
+    #[inline]
+    fn needs_jacobian(self) -> bool {
+        matches!(self, Sum::LmSystem | Sum::LikelihoodSystem)
+    }
+}
+
 /// The maps, the pose and the settings the terms read.
 pub(crate) struct SumInput<'a> {
     pub model: &'a SurfelMap,
@@ -59,9 +67,10 @@ impl<'a> SumInput<'a> {
         }
     }
 
-    /// The inputs of one association.
+    /// The inputs of one association; its Jacobian `a` only `with_jacobian` (a cost
+    /// alone does not read it: with interpolation it is the dearer half of the blend).
     #[inline]
-    pub(crate) fn term(&self, a: &Association) -> TermInput {
+    pub(crate) fn term(&self, a: &Association, with_jacobian: bool) -> TermInput {
         let ss = &self.scene.surfels()[a.scene_surfel as usize];
         let ms = &self.model.surfels()[a.model_surfel as usize];
         let level = ss.level as usize;
@@ -69,8 +78,11 @@ impl<'a> SumInput<'a> {
         let r = &self.rotation;
         let p = r * ss.mean.cast::<f64>() + self.translation;
         let c = rotate_symmetric(r, &ss.cov()) + reg;
-        let m = if self.interpolate {
-            interpolate(self.model, a.model_node, a.model_surfel, &p, self.model.resolution(level))
+        let res = self.model.resolution(level);
+        let m = if self.interpolate && with_jacobian {
+            interpolate::<true>(self.model, a.model_node, a.model_surfel, &p, res)
+        } else if self.interpolate {
+            interpolate::<false>(self.model, a.model_node, a.model_surfel, &p, res)
         } else {
             Interpolated::of(ms)
         };
@@ -80,13 +92,13 @@ impl<'a> SumInput<'a> {
     /// Adds the term of one association to `acc`.
     #[inline]
     pub(crate) fn accumulate(&self, a: &Association, what: Sum, acc: &mut Partial) {
-        add(&self.term(a), what, acc);
+        add(&self.term(a, what.needs_jacobian()), what, acc);
     }
 
     /// [`SumInput::accumulate`], and the LM system (Eq. 5) of the same term into `lm`.
     #[inline]
     fn accumulate_with_lm(&self, a: &Association, what: Sum, acc: &mut Partial, lm: &mut Partial) {
-        let t = self.term(a);
+        let t = self.term(a, true);
         add(&t, what, acc);
         add(&t, Sum::LmSystem, lm);
     }
@@ -128,8 +140,15 @@ impl Interpolated {
 /// blended with weights `wᵢ = Π (1 − |cᵢ − pᵢ| / res)`; otherwise, or if no such cell
 /// holds a usable surfel, the matched surfel itself is returned. The Jacobian of the
 /// blended mean is `Σ (μᵢ − μ) ∇wᵢᵀ / Σ wᵢ = (Σ μᵢ∇wᵢᵀ − μ Σ∇wᵢᵀ) / Σ wᵢ`, summed in
-/// the same pass as the blend.
-pub(crate) fn interpolate(model: &SurfelMap, node: u32, surfel: u32, p: &Vector3<f64>, res: f64) -> Interpolated {
+/// the same pass as the blend, if `JACOBIAN` (else it is left zero: the blended mean
+/// and covariance are the same either way, sum for sum).
+pub(crate) fn interpolate<const JACOBIAN: bool>(
+    model: &SurfelMap,
+    node: u32,
+    surfel: u32,
+    p: &Vector3<f64>,
+    res: f64,
+) -> Interpolated {
     let surfels = model.surfels();
     let matched = || Interpolated::of(&surfels[surfel as usize]);
     let inv_res = 1.0 / res;
@@ -166,9 +185,11 @@ pub(crate) fn interpolate(model: &SurfelMap, node: u32, surfel: u32, p: &Vector3
                     for (c, &v) in cov.iter_mut().zip(&sf.cov_packed) {
                         *c += v as f64 * w;
                     }
-                    let grad = Vector3::new(gx[i] * wy[j] * wz[k], wx[i] * gy[j] * wz[k], wx[i] * wy[j] * gz[k]);
-                    mean_grad += mu * grad.transpose();
-                    grad_sum += grad;
+                    if JACOBIAN {
+                        let grad = Vector3::new(gx[i] * wy[j] * wz[k], wx[i] * gy[j] * wz[k], wx[i] * wy[j] * gz[k]);
+                        mean_grad += mu * grad.transpose();
+                        grad_sum += grad;
+                    }
                 }
             }
         }
@@ -178,7 +199,7 @@ pub(crate) fn interpolate(model: &SurfelMap, node: u32, surfel: u32, p: &Vector3
     }
     let inv_sw = 1.0 / sw;
     let mean = mean * inv_sw;
-    let jacobian = (mean_grad - mean * grad_sum.transpose()) * inv_sw;
+    let jacobian = if JACOBIAN { (mean_grad - mean * grad_sum.transpose()) * inv_sw } else { Matrix3::zeros() };
     let [xx, xy, xz, yy, yz, zz] = cov.map(|c| c * inv_sw);
     Interpolated { mean, cov: symmetric(xx, xy, xz, yy, yz, zz), jacobian }
 }

@@ -16,13 +16,13 @@
 //! allocated here.
 
 mod associate;
-#[cfg(test)]
-mod associate_tests;
 mod cells;
 mod cost;
 mod evaluate;
 pub mod likelihood;
 pub mod params;
+#[cfg(test)]
+mod wall_tests;
 mod workspace;
 
 pub use likelihood::{MatchScore, MatchScratch, match_score};

@@ -1,9 +1,11 @@
-//! Association's cache of search results is exact: a fresh pass after earlier passes
-//! (whose results it reuses where they provably still hold) pairs every scene node as
-//! a pass from scratch does.
+//! Registration's parts on maps of synthetic walls: association's cache of search
+//! results is exact (a fresh pass after earlier passes, whose results it reuses where
+//! they provably still hold, pairs every scene node as a pass from scratch does), and
+//! the trilinear interpolation of model surfels (§4.3) blends the same mean and
+//! covariance with and without its Jacobian, which matches finite differences.
 
 use super::associate::{AssociationInput, DirCandidates, associate};
-use super::evaluate::{Sum, SumInput, slot_offsets};
+use super::evaluate::{Sum, SumInput, interpolate, slot_offsets};
 use super::params::RegistrationParams;
 use super::workspace::{Association, Partial, PassState};
 use crate::frame::RgbdFrame;
@@ -105,4 +107,32 @@ fn a_fresh_pass_reusing_earlier_searches_pairs_as_a_pass_from_scratch() {
     // The recoloured band's nodes find candidates that fail the colour gate; their
     // results without a match are reused while no candidate can come within the radius.
     assert!(reused_without_match > 100, "{reused_without_match} results without a match reused");
+}
+
+#[test]
+fn the_interpolated_mean_s_jacobian_matches_finite_differences_and_a_cost_needs_none() {
+    let (model, scene) = (wall(false), wall(true));
+    let params = RegistrationParams::default();
+    let mut passes = Passes::new(&scene, &params);
+    passes.associate(&model, &scene, &Pose::identity(), true);
+    let (mut checked, mut agree) = (0, 0);
+    for a in passes.assoc.iter().filter(|a| a.is_matched()) {
+        let s = &scene.surfels()[a.scene_surfel as usize];
+        let res = model.resolution(s.level as usize);
+        let at = |p: &nalgebra::Vector3<f64>| interpolate::<true>(&model, a.model_node, a.model_surfel, p, res);
+        let p = s.mean.cast::<f64>();
+        let (full, cost_only) = (at(&p), interpolate::<false>(&model, a.model_node, a.model_surfel, &p, res));
+        assert_eq!((full.mean, full.cov), (cost_only.mean, cost_only.cov));
+        assert_eq!(cost_only.jacobian, nalgebra::Matrix3::zeros());
+        // Central differences, a thousandth of a cell: the blend is piecewise smooth, so
+        // a step that crosses a cell centre may disagree; nearly all must not.
+        let h = 1e-3 * res;
+        let numeric = nalgebra::Matrix3::from_fn(|i, j| {
+            let e = nalgebra::Vector3::ith(j, h);
+            (at(&(p + e)).mean[i] - at(&(p - e)).mean[i]) / (2.0 * h)
+        });
+        checked += 1;
+        agree += usize::from((numeric - full.jacobian).amax() <= 1e-6 + 1e-4 * full.jacobian.amax());
+    }
+    assert!(checked > 500 && agree as f64 >= 0.95 * checked as f64, "{agree} of {checked} Jacobians agree");
 }
