@@ -39,12 +39,8 @@ impl<'a> CubeCells<'a> {
             Parents::Top
         } else {
             let key = [k0[0] >> 1, k0[1] >> 1, k0[2] >> 1];
-            let near_parent = near.map(|m| model.nodes()[m as usize].parent).filter(|&p| p != NONE);
-            let parent = match near_parent {
-                Some(p) => model.find_near(level + 1, key, p),
-                None => model.find(level + 1, key),
-            };
-            match parent {
+            let near_parent = parent_of(model, near);
+            match find_from(model, level + 1, key, near_parent) {
                 Some(p) => Parents::Table(model.neighbors(p)),
                 None => Parents::Built(parents_without_centre(model, level + 1, lo, n, k0, near_parent)),
             }
@@ -113,12 +109,7 @@ fn parents_without_centre(
 ) -> [u32; 27] {
     let centre = k0.map(|k| k >> 1);
     let grandparent = if parent_level + 1 < model.num_levels() {
-        let key = centre.map(|k| k >> 1);
-        let near = near_parent.map(|p| model.nodes()[p as usize].parent).filter(|&g| g != NONE);
-        match near {
-            Some(g) => model.find_near(parent_level + 1, key, g),
-            None => model.find(parent_level + 1, key),
-        }
+        find_from(model, parent_level + 1, centre.map(|k| k >> 1), parent_of(model, near_parent))
     } else {
         None
     };
@@ -142,6 +133,20 @@ fn parents_without_centre(
         }
     }
     table
+}
+
+/// The parent node of `node`, if both exist.
+fn parent_of(model: &crate::map::SurfelMap, node: Option<u32>) -> Option<u32> {
+    node.map(|m| model.nodes()[m as usize].parent).filter(|&p| p != NONE)
+}
+
+/// The node of `key` at `level`: from `near` (a node of that level close by, if any)
+/// through its neighbour table when it can be, else by descent.
+fn find_from(model: &crate::map::SurfelMap, level: usize, key: [i32; 3], near: Option<u32>) -> Option<u32> {
+    match near {
+        Some(n) => model.find_near(level, key, n),
+        None => model.find(level, key),
+    }
 }
 
 /// Squared distance from `p` to the cell `key` of edge `res`.
@@ -177,26 +182,16 @@ pub(super) fn min_of(a: f64, b: f64) -> f64 {
 
 #[cfg(test)]
 mod tests {
+    use super::super::wall_tests::{H, W, map_of_image};
     use super::*;
-    use crate::frame::RgbdFrame;
-    use crate::geometry::{CameraModel, NO_DISTORTION, PinholeIntrinsics};
-    use crate::map::{MapBuilder, MapCapacity, MapParams, SurfelMap};
+    use crate::map::SurfelMap;
 
     /// A map of two slanted walls with square holes: many cells whose parents have no
     /// node lie next to cells that have one.
     fn map_with_holes() -> SurfelMap {
-        let (w, h) = (320usize, 240usize);
-        let intrinsics = PinholeIntrinsics { fx: 268.0, fy: 270.0, cx: 160.0, cy: 124.0 };
-        let camera = CameraModel {
-            width: w as u32,
-            height: h as u32,
-            intrinsics,
-            distortion: NO_DISTORTION,
-            depth_scale_m: 0.0002,
-        };
-        let depth: Vec<u16> = (0..w * h)
+        let depth: Vec<u16> = (0..W * H)
             .map(|i| {
-                let (u, v) = (i % w, i / w);
+                let (u, v) = (i % W, i / W);
                 let hole = (u / 24 + v / 24) % 3 == 0;
                 if hole {
                     0
@@ -207,12 +202,8 @@ mod tests {
                 }
             })
             .collect();
-        let rgb: Vec<u8> = (0..w * h).flat_map(|i| [(i % w / 3) as u8, 90, (i / w / 2) as u8]).collect();
-        let frame = RgbdFrame::new(0, camera, &rgb, &depth).expect("consistent frame");
-        let capacity = MapCapacity::for_image(w * h);
-        let mut map = SurfelMap::new(MapParams::default(), capacity).expect("valid parameters");
-        MapBuilder::new(w, h, capacity.surfels).build(&frame, &mut map).expect("builds");
-        map
+        let rgb: Vec<u8> = (0..W * H).flat_map(|i| [(i % W / 3) as u8, 90, (i / W / 2) as u8]).collect();
+        map_of_image(&rgb, &depth)
     }
 
     #[test]

@@ -14,17 +14,27 @@ use crate::geometry::{CameraModel, NO_DISTORTION, PinholeIntrinsics, Pose};
 use crate::map::{MAX_LEVELS, MapBuilder, MapCapacity, MapParams, SurfelMap};
 use nalgebra::Vector6;
 
-const W: usize = 320;
-const H: usize = 240;
+/// The test images' size.
+pub(super) const W: usize = 320;
+pub(super) const H: usize = 240;
 
-/// A map of a slanted wall with a colour ramp. `scene`: a band painted another colour
-/// (its nodes find candidates nearby that fail the colour gate), and the left half
-/// 26 mm farther away (its finest nodes' candidates lie just beyond their search radius
-/// of 25 mm, until the steps bring them within).
-fn wall(scene: bool) -> SurfelMap {
+/// The map of one `W × H` image (a QVGA-like pinhole camera, depth in 0.2 mm units).
+pub(super) fn map_of_image(rgb: &[u8], depth: &[u16]) -> SurfelMap {
     let intrinsics = PinholeIntrinsics { fx: 268.0, fy: 270.0, cx: 160.0, cy: 124.0 };
     let camera =
         CameraModel { width: W as u32, height: H as u32, intrinsics, distortion: NO_DISTORTION, depth_scale_m: 0.0002 };
+    let frame = RgbdFrame::new(0, camera, rgb, depth).expect("consistent frame");
+    let capacity = MapCapacity::for_image(W * H);
+    let mut map = SurfelMap::new(MapParams::default(), capacity).expect("valid parameters");
+    MapBuilder::new(W, H, capacity.surfels).build(&frame, &mut map).expect("builds");
+    map
+}
+
+/// A map of a slanted wall with a colour ramp. `scene`: a band painted another colour
+/// (its nodes find candidates nearby that fail the colour gate), and the left half
+/// 28 mm farther away (its finest nodes' candidates lie just beyond their search radius
+/// of 25 mm, until the steps bring them within).
+fn wall(scene: bool) -> SurfelMap {
     let far = |u: usize| if scene && u < W / 2 { 140 } else { 0 };
     let depth: Vec<u16> = (0..W * H).map(|i| 3000 + far(i % W) + (i % W) as u16 * 3 + (i / W) as u16).collect();
     let rgb: Vec<u8> = (0..W * H)
@@ -33,11 +43,7 @@ fn wall(scene: bool) -> SurfelMap {
             if scene && (200..260).contains(&u) { [20, 200, 40] } else { [(u / 2) as u8, 90, (v / 2) as u8] }
         })
         .collect();
-    let frame = RgbdFrame::new(0, camera, &rgb, &depth).expect("consistent frame");
-    let capacity = MapCapacity::for_image(W * H);
-    let mut map = SurfelMap::new(MapParams::default(), capacity).expect("valid parameters");
-    MapBuilder::new(W, H, capacity.surfels).build(&frame, &mut map).expect("builds");
-    map
+    map_of_image(&rgb, &depth)
 }
 
 /// The state association keeps between the passes of one registration.
