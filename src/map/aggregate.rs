@@ -188,6 +188,8 @@ pub(crate) struct Band {
     /// With a gate: what it does with each cell met so far in this frame (by cell key;
     /// a cell's entry may be overwritten by another's and is then decided again).
     gate_cells: Vec<(u64, CellGate)>,
+    /// With a gate: the camera-frame depths outside which it keeps no point.
+    gate_depth_m: (f32, f32),
     aggregate_capacity: usize,
     moments_capacity: usize,
 }
@@ -206,6 +208,7 @@ impl Band {
             prev: vec![(NO_CELL, NONE); width],
             cur: vec![(NO_CELL, NONE); width],
             gate_cells: vec![(NO_CELL, CellGate::Straddles); GATE_CELL_SLOTS],
+            gate_depth_m: (f32::NEG_INFINITY, f32::INFINITY),
             aggregate_capacity,
             moments_capacity,
         }
@@ -241,9 +244,10 @@ impl Band {
         let width = frame.width();
         let scale = frame.camera.depth_scale_m as f32;
         self.prev.iter_mut().for_each(|c| *c = (NO_CELL, NONE));
-        if GATED {
+        if GATED && let Some(gate) = input.gate {
             // The gate is this frame's.
             self.gate_cells.fill((NO_CELL, CellGate::Straddles));
+            self.gate_depth_m = gate.camera_depth_range();
         }
         let cols = input.cols.clone();
         for v in self.rows.clone() {
@@ -332,6 +336,11 @@ impl Band {
     ) -> (u64, u32) {
         let Pixel { depth: d, ray, flags, rgb } = px;
         let z = d as f32 * scale;
+        // Beyond the gate's depths (mostly the background behind the object, seen
+        // through the gate's image) a point is dropped before any other work.
+        if GATED && !(z >= self.gate_depth_m.0 && z <= self.gate_depth_m.1) {
+            return (NO_CELL, NONE);
+        }
         let r2 = z * z * ray.range2_factor;
         let level = level_of(r2, &input.level_thresholds_r2);
         if level >= input.num_levels {

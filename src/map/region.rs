@@ -174,6 +174,35 @@ impl PixelGate {
         }
         self.volume.as_ref().is_none_or(|v| v.contains(&q))
     }
+
+    /// Camera-frame depths `(z_min, z_max)` (m) outside which the gate keeps no point:
+    /// the depth range of its box and of its ellipsoid, whichever is narrower, widened
+    /// by 1 mm (and 10⁻⁴ of the depth) beyond the rounding of [`Self::keeps`]. The whole
+    /// range when the gate is degenerate.
+    pub fn camera_depth_range(&self) -> (f32, f32) {
+        // A camera point's depth is `w · (q − t)` for its object-frame point `q`, with
+        // `w` the camera's z axis in the object frame (`q = R p + t`).
+        let r = self.rotation.cast::<f64>();
+        let w = r.column(2).into_owned();
+        let t = self.translation.cast::<f64>();
+        let (lo, hi) = (self.bounds.0.cast::<f64>(), self.bounds.1.cast::<f64>());
+        let centre = (lo + hi) * 0.5;
+        let box_reach = w.abs().dot(&((hi - lo) * 0.5));
+        let box_depth = w.dot(&(centre - t));
+        let mut range = (box_depth - box_reach, box_depth + box_reach);
+        // The ellipsoid `(q − μ)ᵀ S⁻¹ (q − μ) ≤ m²` reaches `√(m² wᵀ S w)` along `w`.
+        if let Some(covariance) = self.inverse_covariance.cast::<f64>().try_inverse() {
+            let reach2 = f64::from(self.max_mahalanobis2) * w.dot(&(covariance * w));
+            let depth = w.dot(&(self.mean.cast::<f64>() - t));
+            if reach2.is_finite() && reach2 >= 0.0 {
+                let reach = reach2.sqrt();
+                range = (range.0.max(depth - reach), range.1.min(depth + reach));
+            }
+        }
+        let slack = |z: f64| 1e-3 + 1e-4 * z.abs();
+        let (near, far) = (range.0 - slack(range.0), range.1 + slack(range.1));
+        if near.is_finite() && far.is_finite() { (near as f32, far as f32) } else { (f32::NEG_INFINITY, f32::INFINITY) }
+    }
 }
 
 /// The gate's ellipsoid as the rays of a pinhole camera meet it: the ray `r` meets
@@ -346,6 +375,61 @@ mod tests {
         assert!(!gate.keeps(&Vector3::new(0.0, 0.0, 1.0)), "on the support plane: below min_z");
         assert!(!gate.keeps(&Vector3::new(0.25, 0.0, 1.1)), "outside the footprint");
         assert!(!gate.keeps(&Vector3::new(0.0, 0.0, 1.45)), "3.5 σ from the mean");
+    }
+
+    /// The depths of the points `gate` keeps on a 1 cm grid over ±0.6 m (object frame),
+    /// each checked against its depth range; returns the kept depths' extremes.
+    fn kept_depths(gate: &PixelGate) -> (f32, f32) {
+        let (near, far) = gate.camera_depth_range();
+        let (mut kept_near, mut kept_far, mut kept) = (f32::INFINITY, f32::NEG_INFINITY, 0);
+        let steps = 120;
+        let at = |k: usize| -0.6 + 1.2 * k as f32 / steps as f32;
+        for (i, j, k) in (0..=steps).flat_map(|i| (0..=steps).flat_map(move |j| (0..=steps).map(move |k| (i, j, k)))) {
+            let q = Vector3::new(at(i), at(j), at(k));
+            let p = gate.rotation.transpose() * (q - gate.translation);
+            if gate.keeps(&p) {
+                kept += 1;
+                (kept_near, kept_far) = (kept_near.min(p.z), kept_far.max(p.z));
+                assert!(p.z >= near && p.z <= far, "kept point at depth {} outside {near}..{far}", p.z);
+            }
+        }
+        assert!(kept > 1000, "the grid meets the gate ({kept} points)");
+        (kept_near, kept_far)
+    }
+
+    #[test]
+    fn no_point_the_gate_keeps_lies_outside_its_depth_range() {
+        // A tilted, elongated ellipsoid, alone, cut by a box, and a box alone.
+        let axes = nalgebra::Rotation3::from_euler_angles(-0.2, 0.5, 1.1).into_inner();
+        let covariance = axes * Matrix3::from_diagonal(&Vector3::new(0.01, 0.0025, 0.0004)) * axes.transpose();
+        let ellipsoid = PixelGate {
+            rotation: nalgebra::Rotation3::from_euler_angles(0.4, -0.7, 0.3).into_inner(),
+            translation: Vector3::new(0.1, -0.2, -0.9),
+            mean: Vector3::new(0.02, 0.01, -0.03),
+            inverse_covariance: covariance.try_inverse().expect("positive definite"),
+            max_mahalanobis2: 12.0,
+            volume: None,
+            bounds: (Vector3::repeat(-10.0), Vector3::repeat(10.0)),
+            cells: None,
+        };
+        let cut = PixelGate { bounds: (Vector3::repeat(-0.4), Vector3::new(0.4, 0.4, 0.1)), ..ellipsoid.clone() };
+        let cube = PixelGate { inverse_covariance: Matrix3::identity() * 1e-6, ..cut.clone() };
+        for (gate, tight) in [(&ellipsoid, true), (&cut, false), (&cube, true)] {
+            let (near, far) = gate.camera_depth_range();
+            let (kept_near, kept_far) = kept_depths(gate);
+            // Where one shape bounds the gate the range is tight: within the grid's
+            // diagonal (1.7 cm) and the slack. (Of an intersection it may be wider.)
+            if tight {
+                assert!(
+                    kept_near - near < 0.02 && far - kept_far < 0.02,
+                    "{near}..{far} against {kept_near}..{kept_far}"
+                );
+            }
+        }
+        // Degenerate gates keep the whole range.
+        let unbounded = (Vector3::repeat(f32::NEG_INFINITY), Vector3::repeat(f32::INFINITY));
+        let flat = PixelGate { inverse_covariance: Matrix3::zeros(), bounds: unbounded, ..ellipsoid };
+        assert_eq!(flat.camera_depth_range(), (f32::NEG_INFINITY, f32::INFINITY));
     }
 
     #[test]
