@@ -72,6 +72,9 @@ pub(crate) struct AssociationInput<'a> {
     pub dirs: DirCandidates,
     /// Bit `l`: the model has a contour node at level `l`.
     pub model_contours: u8,
+    /// Per scene node, a model node a cube search without a previous match visits first
+    /// (`NONE`, or an empty slice: none); see `RegistrationWorkspace::remember_matches`.
+    pub seeds: &'a [u32],
 }
 
 /// Associates all scene nodes (`fresh` ignores the previous matches) and sums `what`
@@ -214,8 +217,12 @@ fn associate_node(
         let c = terms.rotation * center + terms.translation;
         // A fresh pass at a pose near the previous one: the previous match is likely
         // the best again, and visiting it first lets the distance bound skip more cells.
-        let seed = (previous.model_node != NONE)
-            .then(|| (previous.model_node, model.nodes()[previous.model_node as usize].key));
+        // Without one, the same cell's match in the last registration (tracking).
+        let seed_node = match previous.model_node {
+            NONE => input.seeds.get(node_idx).copied().unwrap_or(NONE),
+            m => m,
+        };
+        let seed = (seed_node != NONE).then(|| (seed_node, model.nodes()[seed_node as usize].key));
         search.cube(&c, radius, level, seed);
     } else {
         let key = model.nodes()[previous.model_node as usize].key;

@@ -124,25 +124,12 @@ pub fn register(
         return Err(RegistrationError::NotFinite);
     }
     ws.reset(nodes);
+    ws.seed_from_memory(scene);
     let model_contours = model.contour_levels();
     let mut solver = Solver { model, scene, params, ws, pose: *initial, lm_system: None, model_contours };
-    let (lm_iterations, converged) = solver.levenberg_marquardt()?;
-    let newton_iterations = solver.newton()?;
-    let overlap = solver.overlap();
-    if overlap < params.min_overlap {
-        return Err(RegistrationError::PoorOverlap { overlap, needed: params.min_overlap });
-    }
-    let (covariance, associations, mean_mahalanobis2) = solver.covariance()?;
-    Ok(Registration {
-        model_from_scene: solver.pose,
-        covariance,
-        associations,
-        lm_iterations,
-        newton_iterations,
-        converged,
-        mean_mahalanobis2,
-        overlap,
-    })
+    let result = solver.solve();
+    solver.ws.remember_matches_of(scene);
+    result
 }
 
 struct Solver<'a> {
@@ -159,6 +146,28 @@ struct Solver<'a> {
 }
 
 impl Solver<'_> {
+    /// LM, Newton, the overlap check and the covariance (§4.2–4.3).
+    fn solve(&mut self) -> Result<Registration, RegistrationError> {
+        let params = self.params;
+        let (lm_iterations, converged) = self.levenberg_marquardt()?;
+        let newton_iterations = self.newton()?;
+        let overlap = self.overlap();
+        if overlap < params.min_overlap {
+            return Err(RegistrationError::PoorOverlap { overlap, needed: params.min_overlap });
+        }
+        let (covariance, associations, mean_mahalanobis2) = self.covariance()?;
+        Ok(Registration {
+            model_from_scene: self.pose,
+            covariance,
+            associations,
+            lm_iterations,
+            newton_iterations,
+            converged,
+            mean_mahalanobis2,
+            overlap,
+        })
+    }
+
     fn levels(&self) -> (usize, usize) {
         (self.params.finest_level, self.params.coarsest_level)
     }
@@ -169,8 +178,14 @@ impl Solver<'_> {
         self.lm_system = None;
         let terms = SumInput::new(self.model, self.scene, &self.pose, self.params, interpolate);
         let dirs = DirCandidates::new(&self.pose, self.params.view_dir_min_cos);
-        let input = AssociationInput { terms: &terms, params: self.params, dirs, model_contours: self.model_contours };
         let ws = &mut *self.ws;
+        let input = AssociationInput {
+            terms: &terms,
+            params: self.params,
+            dirs,
+            model_contours: self.model_contours,
+            seeds: &ws.seeds,
+        };
         associate(
             &input,
             (&mut ws.assoc, &mut ws.last_cube),

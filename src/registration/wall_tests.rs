@@ -2,16 +2,19 @@
 //! results is exact (a fresh pass after earlier passes, whose results it reuses where
 //! they provably still hold, pairs every scene node as a pass from scratch does), and
 //! the trilinear interpolation of model surfels (§4.3) blends the same mean and
-//! covariance with and without its Jacobian, which matches finite differences.
+//! covariance with and without its Jacobian, which matches finite differences; and
+//! registrations that start their searches from the last one's matches give the same
+//! results as registrations without them.
 
 use super::associate::{AssociationInput, DirCandidates, associate};
 use super::evaluate::{Sum, SumInput, interpolate, slot_offsets};
 use super::params::RegistrationParams;
 use super::workspace::{Association, Partial, PassState};
+use super::{RegistrationWorkspace, register};
 use crate::frame::RgbdFrame;
 use crate::geometry::se3::compose_left;
 use crate::geometry::{CameraModel, NO_DISTORTION, PinholeIntrinsics, Pose};
-use crate::map::{MAX_LEVELS, MapBuilder, MapCapacity, MapParams, SurfelMap};
+use crate::map::{MAX_LEVELS, MapBuilder, MapCapacity, MapParams, NONE, SurfelMap};
 use nalgebra::Vector6;
 
 /// The test images' size.
@@ -70,7 +73,13 @@ impl Passes {
         let params = RegistrationParams::default();
         let terms = SumInput::new(model, scene, pose, &params, false);
         let dirs = DirCandidates::new(pose, params.view_dir_min_cos);
-        let input = AssociationInput { terms: &terms, params: &params, dirs, model_contours: model.contour_levels() };
+        let input = AssociationInput {
+            terms: &terms,
+            params: &params,
+            dirs,
+            model_contours: model.contour_levels(),
+            seeds: &[],
+        };
         let state = (&mut self.assoc[..], &mut self.last_cube[..]);
         associate(&input, state, &mut self.partials, &mut self.passes, fresh, Sum::LmCost, false);
     }
@@ -141,4 +150,22 @@ fn the_interpolated_mean_s_jacobian_matches_finite_differences_and_a_cost_needs_
         agree += usize::from((numeric - full.jacobian).amax() <= 1e-6 + 1e-4 * full.jacobian.amax());
     }
     assert!(checked > 500 && agree as f64 >= 0.95 * checked as f64, "{agree} of {checked} Jacobians agree");
+}
+
+#[test]
+fn matches_remembered_from_the_last_registration_change_nothing_but_the_order_of_visits() {
+    let (model, scene) = (wall(false), wall(true));
+    let params = RegistrationParams::default();
+    let mut remembering = RegistrationWorkspace::new(scene.nodes().len());
+    remembering.remember_matches();
+    let nudged = compose_left(&Vector6::new(0.004, -0.003, 0.002, 0.01, -0.005, 0.003), &Pose::identity());
+    // The first registration fills the memory; the next ones start their searches from it.
+    for (k, start) in [Pose::identity(), Pose::identity(), nudged, nudged].iter().enumerate() {
+        let seeded = register(&model, &scene, start, &params, &mut remembering);
+        let seeds = remembering.seeds.iter().filter(|&&s| s != NONE).count();
+        let plain = register(&model, &scene, start, &params, &mut RegistrationWorkspace::new(scene.nodes().len()));
+        assert_eq!(format!("{seeded:?}"), format!("{plain:?}"), "registration {k}");
+        assert!(seeded.is_ok(), "registration {k}: {seeded:?}");
+        assert!((k == 0) == (seeds == 0) && (k == 0 || seeds > 200), "registration {k}: {seeds} seeds");
+    }
 }

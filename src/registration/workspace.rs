@@ -2,7 +2,8 @@
 //! per-chunk partial sums. Created once per scene-map capacity and reused.
 
 use super::associate::DirCandidates;
-use crate::map::{MAX_LEVELS, NONE};
+use crate::map::tree::morton_code;
+use crate::map::{MAX_LEVELS, NONE, SurfelMap};
 use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
 
 /// Scene nodes per parallel work item (fixed, so sums do not depend on threads). Small
@@ -146,6 +147,14 @@ pub struct RegistrationWorkspace {
     /// Per-chunk LM systems summed alongside another sum (`evaluate::sum_with_lm`).
     pub(crate) lm_partials: Vec<Partial>,
     pub(crate) passes: Vec<PassState>,
+    /// Per scene node, a model node its cube searches visit first (`NONE`: none): the
+    /// match of the same scene cell in the last registration ([`Self::remember_matches`]).
+    pub(crate) seeds: Vec<u32>,
+    /// The last registration's matches, per scene level in Morton order of the scene
+    /// cells: (Morton code, model node); `remembered_levels[l]` delimits level `l`.
+    remembered: Vec<(u64, u32)>,
+    remembered_levels: [(u32, u32); MAX_LEVELS],
+    remember: bool,
     capacity: usize,
 }
 
@@ -160,8 +169,22 @@ impl RegistrationWorkspace {
             partials: Vec::with_capacity(chunks),
             lm_partials: Vec::with_capacity(chunks),
             passes: Vec::with_capacity(MAX_PASSES),
+            seeds: Vec::with_capacity(scene_node_capacity),
+            remembered: Vec::new(),
+            remembered_levels: [(0, 0); MAX_LEVELS],
+            remember: false,
             capacity: scene_node_capacity,
         }
+    }
+
+    /// For registrations of successive scenes against one model (tracking): each
+    /// registration remembers which model node every scene cell matched, and the next
+    /// one's cube searches of the same cells visit that node first. The results are the
+    /// same (a search finds the closest passing candidate in its cube whatever the order
+    /// of visits); a good first candidate lets the distance bound skip more cells.
+    pub fn remember_matches(&mut self) {
+        self.remember = true;
+        self.remembered.reserve_exact(self.capacity);
     }
 
     /// Largest scene map (in nodes) this workspace serves.
@@ -182,5 +205,48 @@ impl RegistrationWorkspace {
         self.lm_partials.clear();
         self.lm_partials.resize(chunks, Partial::ZERO);
         self.passes.clear();
+        self.seeds.clear();
+        self.seeds.resize(scene_nodes, NONE);
+    }
+
+    /// The seeds of `scene`'s nodes: the remembered matches of the same cells (a merge
+    /// of two Morton-ordered lists per level).
+    pub(crate) fn seed_from_memory(&mut self, scene: &SurfelMap) {
+        if !self.remember {
+            return;
+        }
+        for level in 0..scene.num_levels().min(MAX_LEVELS) {
+            let (start, end) = self.remembered_levels[level];
+            let mut memory = self.remembered[start as usize..end as usize].iter().peekable();
+            for node in scene.level_nodes(level) {
+                let code = morton_code(scene.nodes()[node].key);
+                while memory.next_if(|m| m.0 < code).is_some() {}
+                if let Some(&&(c, model_node)) = memory.peek()
+                    && c == code
+                {
+                    self.seeds[node] = model_node;
+                }
+            }
+        }
+    }
+
+    /// Remembers the matches of `scene`'s nodes (see [`Self::remember_matches`]).
+    pub(crate) fn remember_matches_of(&mut self, scene: &SurfelMap) {
+        if !self.remember {
+            return;
+        }
+        self.remembered.clear();
+        for level in 0..MAX_LEVELS {
+            let start = self.remembered.len() as u32;
+            if level < scene.num_levels() {
+                for node in scene.level_nodes(level) {
+                    let a = &self.assoc[node];
+                    if a.is_matched() && self.remembered.len() < self.capacity {
+                        self.remembered.push((morton_code(scene.nodes()[node].key), a.model_node));
+                    }
+                }
+            }
+            self.remembered_levels[level] = (start, self.remembered.len() as u32);
+        }
     }
 }

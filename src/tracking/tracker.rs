@@ -80,7 +80,12 @@ impl Tracker {
                 model: m.map,
                 extent: m.extent,
                 scene,
-                workspace: RegistrationWorkspace::new(capacity.nodes),
+                workspace: {
+                    // Every frame registers against the same model.
+                    let mut ws = RegistrationWorkspace::new(capacity.nodes);
+                    ws.remember_matches();
+                    ws
+                },
                 scratch: MatchScratch::new(capacity.surfels),
                 next_hypothesis: 0,
                 object_from_camera,
