@@ -217,12 +217,18 @@ fn associate_node(
         let c = terms.rotation * center + terms.translation;
         // A fresh pass at a pose near the previous one: the previous match is likely
         // the best again, and visiting it first lets the distance bound skip more cells.
-        // Without one, the same cell's match in the last registration (tracking).
-        let seed_node = match previous.model_node {
-            NONE => input.seeds.get(node_idx).copied().unwrap_or(NONE),
-            m => m,
-        };
-        let seed = (seed_node != NONE).then(|| (seed_node, model.nodes()[seed_node as usize].key));
+        // Without one, the same cell's match in the last registration (tracking): used
+        // only if it is a node of this model at this level (a seed finds the cube's
+        // cells through its parent).
+        let seed = match previous.model_node {
+            NONE => input
+                .seeds
+                .get(node_idx)
+                .and_then(|&m| model.nodes().get(m as usize).map(|n| (m, n)))
+                .filter(|(_, n)| n.level as usize == level),
+            m => Some((m, &model.nodes()[m as usize])),
+        }
+        .map(|(m, n)| (m, n.key));
         search.cube(&c, radius, level, seed);
     } else {
         let key = model.nodes()[previous.model_node as usize].key;

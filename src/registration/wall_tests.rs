@@ -168,4 +168,10 @@ fn matches_remembered_from_the_last_registration_change_nothing_but_the_order_of
         assert!(seeded.is_ok(), "registration {k}: {seeded:?}");
         assert!((k == 0) == (seeds == 0) && (k == 0 || seeds > 200), "registration {k}: {seeds} seeds");
     }
+    // Matches remembered against another model are indices into the wrong arena: they
+    // must neither fail nor change the result.
+    let other = wall(true);
+    let seeded = register(&other, &scene, &nudged, &params, &mut remembering);
+    let plain = register(&other, &scene, &nudged, &params, &mut RegistrationWorkspace::new(scene.nodes().len()));
+    assert_eq!(format!("{seeded:?}"), format!("{plain:?}"), "another model");
 }
