@@ -143,6 +143,9 @@ pub(crate) struct AggregationInput<'a> {
     pub cols: std::ops::Range<usize>,
     /// Tracking: only the points this gate keeps enter (paper §5.2).
     pub gate: Option<&'a PixelGate>,
+    /// With a gate: the camera-frame depths outside which it keeps no point
+    /// (`PixelGate::camera_depth_range`).
+    pub gate_depth_m: (f32, f32),
     /// With a gate: per row, the columns whose rays can meet it (the others are skipped).
     pub spans: Option<&'a RowSpans>,
 }
@@ -188,8 +191,6 @@ pub(crate) struct Band {
     /// With a gate: what it does with each cell met so far in this frame (by cell key;
     /// a cell's entry may be overwritten by another's and is then decided again).
     gate_cells: Vec<(u64, CellGate)>,
-    /// With a gate: the camera-frame depths outside which it keeps no point.
-    gate_depth_m: (f32, f32),
     aggregate_capacity: usize,
     moments_capacity: usize,
 }
@@ -208,7 +209,6 @@ impl Band {
             prev: vec![(NO_CELL, NONE); width],
             cur: vec![(NO_CELL, NONE); width],
             gate_cells: vec![(NO_CELL, CellGate::Straddles); GATE_CELL_SLOTS],
-            gate_depth_m: (f32::NEG_INFINITY, f32::INFINITY),
             aggregate_capacity,
             moments_capacity,
         }
@@ -244,10 +244,9 @@ impl Band {
         let width = frame.width();
         let scale = frame.camera.depth_scale_m as f32;
         self.prev.iter_mut().for_each(|c| *c = (NO_CELL, NONE));
-        if GATED && let Some(gate) = input.gate {
+        if GATED {
             // The gate is this frame's.
             self.gate_cells.fill((NO_CELL, CellGate::Straddles));
-            self.gate_depth_m = gate.camera_depth_range();
         }
         let cols = input.cols.clone();
         for v in self.rows.clone() {
@@ -338,7 +337,7 @@ impl Band {
         let z = d as f32 * scale;
         // Beyond the gate's depths (mostly the background behind the object, seen
         // through the gate's image) a point is dropped before any other work.
-        if GATED && !(z >= self.gate_depth_m.0 && z <= self.gate_depth_m.1) {
+        if GATED && !(z >= input.gate_depth_m.0 && z <= input.gate_depth_m.1) {
             return (NO_CELL, NONE);
         }
         let r2 = z * z * ray.range2_factor;

@@ -196,6 +196,7 @@ impl MapBuilder {
             placement,
             cols: point_cols,
             gate: region.gate.as_ref(),
+            gate_depth_m: region.gate.as_ref().map_or((f32::NEG_INFINITY, f32::INFINITY), |g| g.camera_depth_range()),
             spans: region.spans.as_ref(),
         };
         self.bands[..self.active_bands].par_iter_mut().for_each(|b| b.aggregate(&input));

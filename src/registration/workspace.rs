@@ -148,7 +148,8 @@ pub struct RegistrationWorkspace {
     pub(crate) lm_partials: Vec<Partial>,
     pub(crate) passes: Vec<PassState>,
     /// Per scene node, a model node its cube searches visit first (`NONE`: none): the
-    /// match of the same scene cell in the last registration ([`Self::remember_matches`]).
+    /// match of the same scene cell in the last registration ([`Self::remember_matches`];
+    /// empty without it).
     pub(crate) seeds: Vec<u32>,
     /// The last registration's matches, per scene level in Morton order of the scene
     /// cells: (Morton code, model node); `remembered_levels[l]` delimits level `l`.
@@ -206,15 +207,15 @@ impl RegistrationWorkspace {
         self.lm_partials.resize(chunks, Partial::ZERO);
         self.passes.clear();
         self.seeds.clear();
-        self.seeds.resize(scene_nodes, NONE);
     }
 
     /// The seeds of `scene`'s nodes: the remembered matches of the same cells (a merge
-    /// of two Morton-ordered lists per level).
+    /// of two Morton-ordered lists per level). Without a memory there are none.
     pub(crate) fn seed_from_memory(&mut self, scene: &SurfelMap) {
         if !self.remember {
             return;
         }
+        self.seeds.resize(scene.nodes().len(), NONE);
         for level in 0..scene.num_levels().min(MAX_LEVELS) {
             let (start, end) = self.remembered_levels[level];
             let mut memory = self.remembered[start as usize..end as usize].iter().peekable();
