@@ -31,6 +31,8 @@ pub struct PixelRay {
 pub struct RayTable {
     camera: Option<CameraModel>,
     rays: Vec<PixelRay>,
+    /// Every ray's `range2_factor` again, contiguous (for the border scan's vector steps).
+    range2_factors: Vec<f32>,
 }
 
 /// The six view-direction axes in the paper's order: +x, −x, +y, −y, +z, −z.
@@ -59,7 +61,7 @@ pub fn view_dirs_of(dir: [f32; 3]) -> (u8, u8) {
 impl RayTable {
     /// An empty table with room for `pixels` rays (allocated once).
     pub fn with_capacity(pixels: usize) -> Self {
-        RayTable { camera: None, rays: Vec::with_capacity(pixels) }
+        RayTable { camera: None, rays: Vec::with_capacity(pixels), range2_factors: Vec::with_capacity(pixels) }
     }
 
     /// Makes the table match `camera`, recomputing only if the camera changed.
@@ -88,6 +90,8 @@ impl RayTable {
                 });
             }
         }
+        self.range2_factors.clear();
+        self.range2_factors.extend(self.rays.iter().map(|r| r.range2_factor));
         self.camera = Some(*camera);
         Ok(())
     }
@@ -95,6 +99,11 @@ impl RayTable {
     /// The rays, row-major.
     pub fn rays(&self) -> &[PixelRay] {
         &self.rays
+    }
+
+    /// Each ray's `range2_factor`, row-major.
+    pub fn range2_factors(&self) -> &[f32] {
+        &self.range2_factors
     }
 }
 

@@ -13,9 +13,13 @@
 //! band keeps per column its first and last valid pixel; a short pass then links the
 //! bands of every column (the jumps across band boundaries and the column's ends). The
 //! flags are those of separate row and column scans, independent of the thread count.
+//!
+//! Within a band, four pixels at a time (`wide`'s portable vectors): a jump needs a
+//! neighbour much nearer or farther, so the test also catches a missing neighbour
+//! (squared range 0), and only such pixels — a few percent — take the scalar path that
+//! finds the nearest valid neighbour across holes.
 
 use super::params::MapParams;
-use crate::frame::PixelRay;
 use rayon::prelude::*;
 use std::ops::Range;
 
@@ -44,20 +48,52 @@ impl ColumnEnds {
     const EMPTY: ColumnEnds = ColumnEnds { first: NO_PIXEL, first_r2: 0.0, last: NO_PIXEL, last_r2: 0.0 };
 }
 
-/// Per band and column, the ends of the column's valid pixels in the band; allocated
-/// once for the largest image.
+/// Per band and column, the ends of the column's valid pixels in the band, and each
+/// band's working rows (see [`BandWork`]); allocated once for the largest image.
 #[derive(Debug, Clone)]
 pub(crate) struct BorderScratch {
     max_width: usize,
     ends: Vec<ColumnEnds>,
+    work: Vec<f32>,
 }
 
 impl BorderScratch {
     pub(crate) fn new(max_width: usize, max_height: usize) -> Self {
         let bands = max_height.div_ceil(BORDER_BAND_ROWS);
-        BorderScratch { max_width, ends: vec![ColumnEnds::EMPTY; bands * max_width] }
+        BorderScratch {
+            max_width,
+            ends: vec![ColumnEnds::EMPTY; bands * max_width],
+            work: vec![0.0; bands * BandWork::len(max_width)],
+        }
     }
 }
+
+/// One band's working rows, in lanes of four from the region's first column: the
+/// squared ranges of the row being scanned (0 where there is no reading) after
+/// [`LANES`] leading zeros (the pixel left of the region has none), and per column the
+/// squared range of its last valid pixel so far in the band (0: none yet).
+struct BandWork<'a> {
+    r2: &'a mut [f32],
+    last_r2: &'a mut [f32],
+}
+
+impl<'a> BandWork<'a> {
+    /// Floats for a band of an image `width` pixels wide.
+    fn len(width: usize) -> usize {
+        let lanes = width.div_ceil(LANES) * LANES;
+        (LANES + lanes) + lanes
+    }
+
+    /// The rows for a region `columns` wide, from a band's share of the scratch.
+    fn split(work: &'a mut [f32], columns: usize) -> Self {
+        let lanes = columns.div_ceil(LANES) * LANES;
+        let (r2, rest) = work.split_at_mut(LANES + lanes);
+        BandWork { r2, last_r2: &mut rest[..lanes] }
+    }
+}
+
+/// Pixels per vector step of the scan.
+const LANES: usize = 4;
 
 /// Marks a depth jump from the earlier pixel `prev` (squared range `prev_r2`) to the
 /// later `here` (`r2`), if there is one: the farther is a virtual border, the nearer
@@ -77,16 +113,11 @@ fn mark_jump(flags: &mut [u8], (prev, prev_r2): (usize, f32), (here, r2): (usize
     }
 }
 
-#[inline(always)]
-fn range2(depth: u16, ray: &PixelRay) -> f32 {
-    let d = depth as f32;
-    d * d * ray.range2_factor
-}
-
 /// What every band reads.
 struct ScanInput<'a> {
     depth: &'a [u16],
-    rays: &'a [PixelRay],
+    /// Per pixel, squared range = depth² · factor (`PixelRay::range2_factor`).
+    range2_factors: &'a [f32],
     width: usize,
     cols: Range<usize>,
     jump2: f32,
@@ -96,41 +127,94 @@ struct ScanInput<'a> {
 /// Clears the flags of the band's rows (`flags` holds them, from row `rows.start`), sets
 /// those of its row scans and of the jumps between its rows, and records each column's
 /// ends in `ends`.
-fn scan_band(input: &ScanInput, rows: Range<usize>, flags: &mut [u8], ends: &mut [ColumnEnds]) {
-    let (width, jump2, fg) = (input.width, input.jump2, input.foreground);
+///
+/// Four pixels at a time, each compared with its left neighbour and with the last valid
+/// pixel above it in its column: a pair without a jump (nearly all) needs nothing more.
+/// A pixel with a jump, with a hole or the region's edge to its left, or without a
+/// valid pixel above it in the band goes through [`mark_pixel`], the definition. (A
+/// missing neighbour's squared range is 0, which the jump test takes for a jump.) The
+/// flags are those of pixel-by-pixel scans.
+fn scan_band(input: &ScanInput, rows: Range<usize>, flags: &mut [u8], ends: &mut [ColumnEnds], work: BandWork) {
+    use wide::f32x4;
     let cols = input.cols.clone();
+    let (n, width) = (cols.len(), input.width);
+    let lanes = n.div_ceil(LANES) * LANES;
     flags.fill(0);
     ends[cols.clone()].fill(ColumnEnds::EMPTY);
+    // The leading zeros and the padding past the region stay zero: no pixel there.
+    work.r2.fill(0.0);
+    work.last_r2.fill(0.0);
+    let (j2, zero) = (f32x4::splat(input.jump2), f32x4::ZERO);
     for v in rows.clone() {
-        let local_row = (v - rows.start) * width;
-        let mut prev: Option<(usize, f32)> = None;
-        // The row's depths, rays and column ends as slices, read in step (no index
-        // checks per pixel).
-        let (start, end) = (v * width + cols.start, v * width + cols.end);
-        let row = input.depth[start..end].iter().zip(&input.rays[start..end]).zip(&mut ends[cols.clone()]);
-        for (u, ((&d, ray), e)) in cols.clone().zip(row) {
-            if d == 0 {
-                continue;
-            }
-            let r2 = range2(d, ray);
-            let here = local_row + u;
-            // Along the row.
-            match prev {
-                Some(p) => mark_jump(flags, p, (here, r2), jump2, fg),
-                None => flags[here] |= VIRTUAL_BORDER,
-            }
-            prev = Some((here, r2));
-            // Along the column, within the band.
-            if e.last == NO_PIXEL {
-                (e.first, e.first_r2) = (here as u32, r2);
-            } else {
-                mark_jump(flags, (e.last as usize, e.last_r2), (here, r2), jump2, fg);
-            }
-            (e.last, e.last_r2) = (here as u32, r2);
+        let band_row = v - rows.start;
+        let start = v * width + cols.start;
+        let depth = &input.depth[start..start + n];
+        let factors = &input.range2_factors[start..start + n];
+        // A pixel without a reading (depth 0) gets 0.
+        for ((o, &d), &f) in work.r2[LANES..LANES + n].iter_mut().zip(depth).zip(factors) {
+            let d = d as f32;
+            *o = d * d * f;
         }
-        if let Some((p, _)) = prev {
-            flags[p] |= VIRTUAL_BORDER;
+        let row_r2 = &work.r2[LANES..LANES + n];
+        let here = work.r2[LANES..LANES + lanes].as_chunks::<LANES>().0;
+        let left = work.r2[LANES - 1..LANES - 1 + lanes].as_chunks::<LANES>().0;
+        let above = work.last_r2.as_chunks_mut::<LANES>().0;
+        for (g, ((h, l), a)) in here.iter().zip(left).zip(above.iter_mut()).enumerate() {
+            let (h, l, a_r2) = (f32x4::from(*h), f32x4::from(*l), f32x4::from(*a));
+            let jump = |p: f32x4| p.simd_lt(j2 * h) | (p * j2).simd_gt(h);
+            let valid = h.simd_gt(zero);
+            let mut to_mark = (valid & (jump(l) | jump(a_r2))).to_bitmask();
+            while to_mark != 0 {
+                let k = to_mark.trailing_zeros() as usize;
+                to_mark &= to_mark - 1;
+                mark_pixel(input, (flags, &mut *ends), (&rows, v), (g * LANES + k, row_r2), a[k]);
+            }
+            *a = valid.select(h, a_r2).to_array();
         }
+        // The row's last valid pixel lies on a border.
+        if let Some(i) = row_r2.iter().rposition(|&r| r > 0.0) {
+            flags[band_row * width + cols.start + i] |= VIRTUAL_BORDER;
+        }
+    }
+    // Each column's last valid pixel in the band.
+    for ((u, e), &r2) in cols.clone().zip(&mut ends[cols]).zip(work.last_r2.iter()) {
+        if r2 > 0.0 {
+            (e.last, e.last_r2) = (last_valid_above(input, &rows, rows.end, u) as u32, r2);
+        }
+    }
+}
+
+/// The band index of the last valid pixel of column `u` in the band's rows before
+/// `row` (there is one).
+fn last_valid_above(input: &ScanInput, rows: &Range<usize>, row: usize, u: usize) -> usize {
+    let w = (rows.start..row).rev().find(|&w| input.depth[w * input.width + u] != 0).unwrap_or(rows.start);
+    (w - rows.start) * input.width + u
+}
+
+/// The borders of the valid pixel at column `i` of the region in row `v`, by their
+/// definition: `row_r2` holds the row's squared ranges from the region's first column
+/// (0: no reading), `above_r2` the squared range of the column's last valid pixel above
+/// it in the band (0: none yet).
+fn mark_pixel(
+    input: &ScanInput,
+    (flags, ends): (&mut [u8], &mut [ColumnEnds]),
+    (rows, v): (&Range<usize>, usize),
+    (i, row_r2): (usize, &[f32]),
+    above_r2: f32,
+) {
+    let (jump2, fg) = (input.jump2, input.foreground);
+    let u = input.cols.start + i;
+    let here = ((v - rows.start) * input.width + u, row_r2[i]);
+    // Along the row, from the nearest valid pixel to the left.
+    match row_r2[..i].iter().rposition(|&r| r > 0.0) {
+        Some(j) => mark_jump(flags, (here.0 - (i - j), row_r2[j]), here, jump2, fg),
+        None => flags[here.0] |= VIRTUAL_BORDER,
+    }
+    // Along the column, from the last valid pixel above.
+    if above_r2 > 0.0 {
+        mark_jump(flags, (last_valid_above(input, rows, v, u), above_r2), here, jump2, fg);
+    } else {
+        (ends[u].first, ends[u].first_r2) = (here.0 as u32, here.1);
     }
 }
 
@@ -140,7 +224,7 @@ fn scan_band(input: &ScanInput, rows: Range<usize>, flags: &mut [u8], ends: &mut
 /// foreground contours are marked come from `params` (paper: 0.9, marked).
 pub(crate) fn mark_borders(
     depth: &[u16],
-    rays: &[PixelRay],
+    range2_factors: &[f32],
     width: usize,
     (rows, cols): (Range<usize>, Range<usize>),
     flags: &mut [u8],
@@ -154,7 +238,7 @@ pub(crate) fn mark_borders(
     let jump = params.depth_jump_ratio as f32;
     let input = ScanInput {
         depth,
-        rays,
+        range2_factors,
         width,
         cols: cols.clone(),
         jump2: jump * jump,
@@ -163,13 +247,17 @@ pub(crate) fn mark_borders(
     let region_flags = &mut flags[rows.start * width..rows.end * width];
     let bands = rows.len().div_ceil(BORDER_BAND_ROWS);
     let ends = &mut scratch.ends[..bands * scratch.max_width];
+    let work_len = BandWork::len(scratch.max_width);
+    let work = &mut scratch.work[..bands * work_len];
     region_flags
         .par_chunks_mut(BORDER_BAND_ROWS * width)
         .zip(ends.par_chunks_mut(scratch.max_width))
+        .zip(work.par_chunks_mut(work_len))
         .enumerate()
-        .for_each(|(b, (band_flags, band_ends))| {
+        .for_each(|(b, ((band_flags, band_ends), band_work))| {
             let start = rows.start + b * BORDER_BAND_ROWS;
-            scan_band(&input, start..(start + BORDER_BAND_ROWS).min(rows.end), band_flags, band_ends);
+            let band_work = BandWork::split(band_work, cols.len());
+            scan_band(&input, start..(start + BORDER_BAND_ROWS).min(rows.end), band_flags, band_ends, band_work);
         });
     if bands == 0 {
         return;
@@ -199,11 +287,11 @@ mod tests {
 
     fn flags_of(depth: &[u16], width: usize, mark_foreground: bool) -> Vec<u8> {
         let height = depth.len() / width;
-        let rays = vec![PixelRay { range2_factor: 1.0, ..Default::default() }; depth.len()];
+        let factors = vec![1.0; depth.len()];
         let mut flags = vec![0xFF; depth.len()];
         let mut scratch = BorderScratch::new(width, height);
         let params = MapParams { mark_foreground_borders: mark_foreground, ..MapParams::default() };
-        mark_borders(depth, &rays, width, (0..height, 0..width), &mut flags, &params, &mut scratch);
+        mark_borders(depth, &factors, width, (0..height, 0..width), &mut flags, &params, &mut scratch);
         flags
     }
 
@@ -270,12 +358,12 @@ mod tests {
                 }
             })
             .collect();
-        let rays = vec![PixelRay { range2_factor: 1.0, ..Default::default() }; depth.len()];
+        let factors = vec![1.0; depth.len()];
         let mut scratch = BorderScratch::new(width, height);
         for (rows, cols) in [(0..height, 0..width), (3..90, 5..30), (40..41, 0..width), (10..10, 0..width)] {
             let mut flags = vec![0xFFu8; depth.len()];
             let params = MapParams::default();
-            mark_borders(&depth, &rays, width, (rows.clone(), cols.clone()), &mut flags, &params, &mut scratch);
+            mark_borders(&depth, &factors, width, (rows.clone(), cols.clone()), &mut flags, &params, &mut scratch);
             let expected = reference(&depth, width, rows.clone(), cols, 0.9f32 * 0.9);
             let region = rows.start * width..rows.end * width;
             assert_eq!(flags[region.clone()], expected[region], "rows {rows:?}");

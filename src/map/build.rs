@@ -179,7 +179,15 @@ impl MapBuilder {
         let ((rows, cols), (point_rows, point_cols)) = region.clipped(width, height);
         self.configure_bands(width, rows.clone(), &point_rows);
         let flags = &mut self.flags[..width * height];
-        mark_borders(frame.depth, self.rays.rays(), width, (rows, cols.clone()), flags, params, &mut self.borders);
+        mark_borders(
+            frame.depth,
+            self.rays.range2_factors(),
+            width,
+            (rows, cols.clone()),
+            flags,
+            params,
+            &mut self.borders,
+        );
         let flags = &*flags;
         let mut inv_resolution = [0.0f32; MAX_LEVELS];
         for (l, inv) in inv_resolution.iter_mut().enumerate().take(params.num_levels) {
