@@ -150,7 +150,8 @@ fn scan_band(input: &ScanInput, rows: Range<usize>, flags: &mut [u8], ends: &mut
         let start = v * width + cols.start;
         let depth = &input.depth[start..start + n];
         let factors = &input.range2_factors[start..start + n];
-        // A pixel without a reading (depth 0) gets 0.
+        // A pixel without a reading (depth 0) gets 0, every other a positive range (the
+        // factors are at least 1): the range says which pixels are valid, as the depth does.
         for ((o, &d), &f) in work.r2[LANES..LANES + n].iter_mut().zip(depth).zip(factors) {
             let d = d as f32;
             *o = d * d * f;
