@@ -5,7 +5,7 @@
 //! |---|---|---|
 //! | `<camera>/rgbd/vga`, `<camera>/rgbd/qvga` | [`RgbdFrameVga`](super::wire::RgbdFrameVga) / [`RgbdFrameQvga`](super::wire::RgbdFrameQvga) | safe overflow, subscriber buffer 1 (a late subscriber gets the newest frame, stale ones are overwritten, the driver is never blocked), history 0, ≤ 2 publishers, ≤ 8 subscribers |
 //! | same name, event | — | the driver notifies after each send; subscribers wait on it (no polling) |
-//! | `mrsmap/poses` | blackboard, key `u32` object id → [`ObjectPose`](super::wire::ObjectPose) | created by the tracker (its only writer), ≤ 16 readers; each entry holds the object's newest pose |
+//! | `mrsmap/poses` | blackboard, key `u32` object id → [`ObjectPose`] | created by the tracker (its only writer), ≤ 16 readers; each entry holds the object's newest pose |
 //! | `mrsmap/poses`, event | — | the tracker notifies after each frame's poses |
 //!
 //! Poses go on a blackboard rather than a publish–subscribe service: updating an entry

@@ -3,7 +3,7 @@
 //! [`register`] finds `model_from_scene`, the pose that maps scene-map coordinates into
 //! the model map, starting from an initial guess:
 //!
-//! 1. associate surfels across resolutions (§4.1, [`associate`]);
+//! 1. associate surfels across resolutions (§4.1, `associate.rs`);
 //! 2. Levenberg–Marquardt on the weighted least squares of Eq. (5), re-associating
 //!    after every accepted step (bootstrapped from the previous matches) and once from
 //!    scratch before declaring convergence;
