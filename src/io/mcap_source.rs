@@ -6,6 +6,7 @@
 //! cut off before it was finished, or an unchunked file — is streamed from the start; if
 //! it is damaged, the messages before the damage are delivered and the damage reported.
 
+use super::zstd_chunk::WholeChunkZstd;
 use mcap::sans_io::LinearReaderOptions;
 use mcap::sans_io::indexed_reader::{IndexedReadEvent, IndexedReader, IndexedReaderOptions};
 use mcap::sans_io::summary_reader::{SummaryReadEvent, SummaryReader, SummaryReaderOptions};
@@ -95,6 +96,13 @@ impl Indexed {
         IndexedReaderOptions::new().include_topics(topics.iter().cloned()).with_record_length_limit(MAX_RECORD_BYTES)
     }
 
+    /// The reader over `summary`'s chunks, with zstd chunks decoded whole (`zstd_chunk`).
+    fn reader(summary: &Summary, topics: &[String]) -> mcap::McapResult<IndexedReader> {
+        let mut reader = IndexedReader::new_with_options(summary, Self::options(topics))?;
+        reader.add_decompressor(WholeChunkZstd::default())?;
+        Ok(reader)
+    }
+
     /// The next message, handed to `visit` while the reader lends its bytes.
     fn next<R>(&mut self, visit: &mut impl FnMut(RawMessage<'_>) -> R) -> Next<R> {
         loop {
@@ -158,7 +166,7 @@ impl Indexed {
         if rest.chunk_indexes.is_empty() {
             return false;
         }
-        match IndexedReader::new_with_options(&rest, Self::options(&self.topics)) {
+        match Self::reader(&rest, &self.topics) {
             Ok(reader) => {
                 self.reader = reader;
                 self.resuming = Some(self.delivered_at_last.clone());
@@ -253,9 +261,7 @@ impl McapSource {
         }
         let topics: Vec<String> = topics.iter().map(|t| t.to_string()).collect();
         // An index the reader refuses (a chunk larger than any we read) counts as damaged.
-        let indexed = summary.and_then(|s| {
-            IndexedReader::new_with_options(&s, Indexed::options(&topics)).ok().map(|reader| (s, reader))
-        });
+        let indexed = summary.and_then(|s| Indexed::reader(&s, &topics).ok().map(|reader| (s, reader)));
         let source = match indexed {
             Some((summary, reader)) => Source::Indexed(Box::new(Indexed::new(file, file_len, summary, topics, reader))),
             None => {

@@ -15,3 +15,4 @@ pub mod ros2;
 pub mod tracker_config;
 pub mod tum;
 pub mod wire;
+mod zstd_chunk;
