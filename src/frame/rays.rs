@@ -6,6 +6,7 @@
 //! the ray only and not on the depth.
 
 use crate::geometry::{CameraError, CameraModel};
+use rayon::prelude::*;
 
 /// `cos(67.5°)`: a view direction contributes to every surfel whose axis is within
 /// 67.5° of it when view directions are smoothed (§3.1).
@@ -72,23 +73,21 @@ impl RayTable {
         }
         camera.validate()?;
         self.camera = None;
+        let (width, height) = (camera.width as usize, camera.height as usize);
         self.rays.clear();
-        for v in 0..camera.height {
-            for u in 0..camera.width {
-                let (x, y) = camera
-                    .unproject_normalized(u as f64, v as f64)
-                    .ok_or(CameraError::NonInvertibleDistortion { u, v })?;
-                let norm = (x * x + y * y + 1.0).sqrt();
-                let dir = [(x / norm) as f32, (y / norm) as f32, (1.0 / norm) as f32];
-                let (best_dir, near_dirs) = view_dirs_of(dir);
-                self.rays.push(PixelRay {
-                    x: x as f32,
-                    y: y as f32,
-                    range2_factor: (x * x + y * y + 1.0) as f32,
-                    best_dir,
-                    near_dirs,
-                });
-            }
+        self.rays.resize(width * height, PixelRay::default());
+        // Bands of rows in parallel, each pixel computed as alone: the same table for any
+        // number of threads. The first failing band in image order names the pixel, as a
+        // row-major scan would.
+        let failed = self
+            .rays
+            .par_chunks_mut(RAY_BAND_ROWS * width)
+            .enumerate()
+            .map(|(b, band)| fill_band(camera, b * RAY_BAND_ROWS, width, band))
+            .find_first(Result::is_err);
+        if let Some(Err(e)) = failed {
+            self.rays.clear();
+            return Err(e);
         }
         self.range2_factors.clear();
         self.range2_factors.extend(self.rays.iter().map(|r| r.range2_factor));
@@ -105,6 +104,26 @@ impl RayTable {
     pub fn range2_factors(&self) -> &[f32] {
         &self.range2_factors
     }
+}
+
+/// Rows per parallel work item of the ray table.
+const RAY_BAND_ROWS: usize = 8;
+
+/// The rays of the rows from `first_row` on, `width` pixels each, into `band`.
+fn fill_band(camera: &CameraModel, first_row: usize, width: usize, band: &mut [PixelRay]) -> Result<(), CameraError> {
+    for (r, row) in band.chunks_exact_mut(width).enumerate() {
+        let v = (first_row + r) as u32;
+        for (u, ray) in (0u32..).zip(row.iter_mut()) {
+            let (x, y) =
+                camera.unproject_normalized(u as f64, v as f64).ok_or(CameraError::NonInvertibleDistortion { u, v })?;
+            let norm = (x * x + y * y + 1.0).sqrt();
+            let dir = [(x / norm) as f32, (y / norm) as f32, (1.0 / norm) as f32];
+            let (best_dir, near_dirs) = view_dirs_of(dir);
+            *ray =
+                PixelRay { x: x as f32, y: y as f32, range2_factor: (x * x + y * y + 1.0) as f32, best_dir, near_dirs };
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]
