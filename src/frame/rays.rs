@@ -75,6 +75,7 @@ impl RayTable {
         self.camera = None;
         let (width, height) = (camera.width as usize, camera.height as usize);
         self.rays.clear();
+        self.range2_factors.clear();
         self.rays.resize(width * height, PixelRay::default());
         // Bands of rows in parallel, each pixel computed as alone: the same table for any
         // number of threads. The first failing band in image order names the pixel, as a
@@ -89,7 +90,6 @@ impl RayTable {
             self.rays.clear();
             return Err(e);
         }
-        self.range2_factors.clear();
         self.range2_factors.extend(self.rays.iter().map(|r| r.range2_factor));
         self.camera = Some(*camera);
         Ok(())
