@@ -6,14 +6,14 @@ use super::interrupt::{Interrupted, Stop};
 use super::poses_client::{object_trajectory_header, object_trajectory_path};
 use super::read_ahead::ReadAhead;
 use super::report::{percentile, progress_bar};
-use super::tracking::{StepOutput, load_tracker, track_frame};
+use super::tracking::{StepOutput, load_models, track_frame, tracker_for};
 use crate::geometry::{CameraModel, Pose};
 use crate::io::mcap_source::ReadMode;
 use crate::io::mcap_write::{McapFile, ObjectPoseRecord, PoseChannels};
 use crate::io::recording::{Damage, RecordingReader, RecordingStats, RecordingTopics};
 use crate::io::tracker_config::TrackerConfig;
 use crate::io::tum::write_trajectory;
-use crate::tracking::{Tracker, TrackingStatus};
+use crate::tracking::{ObjectModel, Tracker, TrackingStatus};
 use anyhow::{Context, Result, bail};
 use std::path::PathBuf;
 use std::time::Instant;
@@ -84,7 +84,11 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
     }
     let started = Instant::now();
     let reader = RecordingReader::open(&job.input, job.topics.clone(), job.camera)?;
+    let depth_count = reader.depth_count();
+    let mut frames = ReadAhead::start(reader, job.qvga).context("starting the reader thread")?;
     let pool = thread_pool(config.threads)?;
+    // While the reader thread reads the first frame (which sizes the tracker).
+    let models = pool.install(|| load_models(config))?;
     let names: Vec<String> = config.objects.iter().map(|o| o.name.clone()).collect();
     // Written next to the target and renamed when finished, also after an error, so
     // the poses computed before it are kept.
@@ -99,6 +103,7 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
         None => None,
     };
     let mut state = Replay {
+        models: Some(models),
         tracker: None,
         out: StepOutput::new(names.len()),
         statuses: vec![[0; 4]; names.len()],
@@ -108,9 +113,7 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
         first_tracked: None,
         interrupted: None,
     };
-    let depth_count = reader.depth_count();
     let bar = progress_bar(depth_count.unwrap_or(0), "replaying");
-    let mut frames = ReadAhead::start(reader, job.qvga).context("starting the reader thread")?;
     let result = state.replay(config, job, &mut frames, &pool, &names, output.as_mut(), &bar);
     if let Some(i) = &mut state.interrupted {
         i.of = depth_count.map(|n| n as usize);
@@ -144,6 +147,8 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
 }
 
 struct Replay {
+    /// The loaded models, until the first frame sizes the tracker.
+    models: Option<Vec<ObjectModel>>,
     tracker: Option<Tracker>,
     out: StepOutput,
     statuses: Vec<[usize; 4]>,
@@ -192,7 +197,10 @@ impl Replay {
             let tracker = match &mut self.tracker {
                 Some(t) => t,
                 // Sized by the first frame: the recording's resolution.
-                None => self.tracker.insert(load_tracker(config, frame.width(), frame.height())?),
+                None => {
+                    let models = self.models.take().unwrap_or_default();
+                    self.tracker.insert(tracker_for(config, models, frame.width(), frame.height())?)
+                }
             };
             track_frame(tracker, pool, &frame, &mut self.out);
             self.first_tracked.get_or_insert_with(Instant::now);
@@ -252,9 +260,9 @@ pub fn print_summary(s: &ReplaySummary) {
         // A long recording's rate: its start-up is paid once.
         if let Some(startup) = s.startup_seconds.filter(|_| s.tracked_frames > 1) {
             println!(
-                "  after the first frame: {:.1} frames/s (start-up, model loading and the first frame took {:.2} s)",
+                "  after the first frame: {:.1} frames/s (start-up, model loading and the first frame took {:.0} ms)",
                 (s.tracked_frames - 1) as f64 / (s.seconds - startup),
-                startup
+                startup * 1e3
             );
         }
     }

@@ -12,6 +12,11 @@ use std::time::Instant;
 /// Loads every configured model (clear errors naming the file) and allocates the
 /// tracker for frames up to `max_width × max_height`.
 pub fn load_tracker(config: &TrackerConfig, max_width: usize, max_height: usize) -> Result<Tracker> {
+    tracker_for(config, load_models(config)?, max_width, max_height)
+}
+
+/// Loads and checks every configured model, with errors naming the object and the file.
+pub fn load_models(config: &TrackerConfig) -> Result<Vec<ObjectModel>> {
     let mut models = Vec::with_capacity(config.objects.len());
     for o in &config.objects {
         let model = load(&o.model).with_context(|| format!("loading the model of object '{}'", o.name))?;
@@ -24,6 +29,16 @@ pub fn load_tracker(config: &TrackerConfig, max_width: usize, max_height: usize)
             search: o.search,
         });
     }
+    Ok(models)
+}
+
+/// Allocates the tracker of `models` for frames up to `max_width × max_height`.
+pub fn tracker_for(
+    config: &TrackerConfig,
+    models: Vec<ObjectModel>,
+    max_width: usize,
+    max_height: usize,
+) -> Result<Tracker> {
     Ok(Tracker::new(config.params, max_width, max_height, models)?)
 }
 
