@@ -416,24 +416,63 @@ impl Band {
         aggregate.border |= flags & FOREGROUND_BORDER != 0;
         let r = aggregate.reference;
         let rel = [x - r[0], y - r[1], z - r[2], l - r[3], a - r[4], b - r[5]];
+        let pool = MomentsPool {
+            moments: &mut self.moments,
+            capacity: self.moments_capacity,
+            dropped: &mut self.dropped_points,
+        };
+        pool.accumulate(aggregate, dirs, &rel);
+        (packed, agg)
+    }
+}
+
+/// A band's moments as the pixel loop adds to them.
+struct MomentsPool<'a> {
+    moments: &'a mut Vec<Moments>,
+    capacity: usize,
+    /// Points dropped because the pool is full.
+    dropped: &'a mut u32,
+}
+
+impl MomentsPool<'_> {
+    /// Adds the point `rel` (relative to the aggregate's reference) to the aggregate's
+    /// moments of each view direction in `dirs`.
+    #[inline(always)]
+    fn accumulate(mut self, aggregate: &mut Aggregate, dirs: u8, rel: &[f32; 6]) {
+        if dirs.is_power_of_two() {
+            // One view direction (always so without smoothing): no loop, so that the
+            // products stay in registers.
+            if let Some(slot) = self.slot(aggregate, dirs.trailing_zeros() as usize) {
+                accumulate(&mut self.moments[slot as usize], rel);
+            }
+            return;
+        }
         let mut remaining = dirs;
         while remaining != 0 {
             let dir = remaining.trailing_zeros() as usize;
             remaining &= remaining - 1;
-            let mut slot = aggregate.moments[dir];
-            if slot == NONE {
-                if self.moments.len() >= self.moments_capacity {
-                    self.dropped_points += 1;
-                    continue;
-                }
-                self.moments.push([0.0; 28]);
-                slot = self.moments.len() as u32 - 1;
-                aggregate.moments[dir] = slot;
-                aggregate.dir_mask |= 1 << dir;
+            if let Some(slot) = self.slot(aggregate, dir) {
+                accumulate(&mut self.moments[slot as usize], rel);
             }
-            accumulate(&mut self.moments[slot as usize], &rel);
         }
-        (packed, agg)
+    }
+
+    /// The aggregate's moments of view direction `dir`, created on first use; `None`
+    /// (the point is dropped) when the pool is full.
+    #[inline(always)]
+    fn slot(&mut self, aggregate: &mut Aggregate, dir: usize) -> Option<u32> {
+        if aggregate.moments[dir] != NONE {
+            return Some(aggregate.moments[dir]);
+        }
+        if self.moments.len() >= self.capacity {
+            *self.dropped += 1;
+            return None;
+        }
+        self.moments.push([0.0; 28]);
+        let slot = self.moments.len() as u32 - 1;
+        aggregate.moments[dir] = slot;
+        aggregate.dir_mask |= 1 << dir;
+        Some(slot)
     }
 }
 
