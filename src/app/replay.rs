@@ -103,7 +103,7 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
         None => None,
     };
     let mut state = Replay {
-        models: Some(models),
+        models,
         tracker: None,
         out: StepOutput::new(names.len()),
         statuses: vec![[0; 4]; names.len()],
@@ -147,8 +147,8 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
 }
 
 struct Replay {
-    /// The loaded models, until the first frame sizes the tracker.
-    models: Option<Vec<ObjectModel>>,
+    /// The loaded models, moved into the tracker when the first frame sizes it.
+    models: Vec<ObjectModel>,
     tracker: Option<Tracker>,
     out: StepOutput,
     statuses: Vec<[usize; 4]>,
@@ -198,7 +198,7 @@ impl Replay {
                 Some(t) => t,
                 // Sized by the first frame: the recording's resolution.
                 None => {
-                    let models = self.models.take().unwrap_or_default();
+                    let models = std::mem::take(&mut self.models);
                     self.tracker.insert(tracker_for(config, models, frame.width(), frame.height())?)
                 }
             };
