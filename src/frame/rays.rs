@@ -116,11 +116,11 @@ fn fill_band(camera: &CameraModel, first_row: usize, width: usize, band: &mut [P
         for (u, ray) in (0u32..).zip(row.iter_mut()) {
             let (x, y) =
                 camera.unproject_normalized(u as f64, v as f64).ok_or(CameraError::NonInvertibleDistortion { u, v })?;
-            let norm = (x * x + y * y + 1.0).sqrt();
+            let range2 = x * x + y * y + 1.0;
+            let norm = range2.sqrt();
             let dir = [(x / norm) as f32, (y / norm) as f32, (1.0 / norm) as f32];
             let (best_dir, near_dirs) = view_dirs_of(dir);
-            *ray =
-                PixelRay { x: x as f32, y: y as f32, range2_factor: (x * x + y * y + 1.0) as f32, best_dir, near_dirs };
+            *ray = PixelRay { x: x as f32, y: y as f32, range2_factor: range2 as f32, best_dir, near_dirs };
         }
     }
     Ok(())
