@@ -276,7 +276,7 @@ pub fn tracking_ms(
     half: bool,
     gap: std::time::Duration,
 ) -> Result<TrackingTimes> {
-    use super::tracking::{StepOutput, load_tracker, track_frame};
+    use super::tracking::{StepOutput, load_models, track_frame, tracker_for};
     let camera = read_camera(&job.camera)?;
     let dataset = TumDataset::open(&job.dataset).with_context(|| format!("opening {}", job.dataset.display()))?;
     let mut loader = FrameLoader::new(camera, half);
@@ -289,12 +289,9 @@ pub fn tracking_ms(
     if decoded.is_empty() {
         bail!("no frames after --first-frame {first_frame}");
     }
-    let mut tracker = load_tracker(config, cam.width as usize, cam.height as usize)?;
-    let world_from_model: Vec<Pose> = config
-        .objects
-        .iter()
-        .map(|o| crate::model::load(&o.model).map(|m| m.world_from_model()))
-        .collect::<Result<_, _>>()?;
+    let models = load_models(config)?;
+    let world_from_model = models.world_from_model;
+    let mut tracker = tracker_for(config, models.objects, cam.width as usize, cam.height as usize)?;
     let gt = dataset
         .groundtruth
         .as_ref()

@@ -11,7 +11,7 @@
 //! flag for failures are reported per threshold.
 
 use super::dataset::thread_pool;
-use super::tracking::{StepOutput, load_tracker, track_frame};
+use super::tracking::{StepOutput, load_models, track_frame, tracker_for};
 use crate::eval::align_rigid;
 use crate::geometry::Pose;
 use crate::geometry::se3::left_increment;
@@ -19,7 +19,6 @@ use crate::io::camera_file::read_camera;
 use crate::io::frames::FrameLoader;
 use crate::io::tracker_config::TrackerConfig;
 use crate::io::tum::TumDataset;
-use crate::model::load;
 use crate::synthetic::Pcg32;
 use crate::tracking::TrackingStatus;
 use anyhow::{Context, Result, bail};
@@ -75,8 +74,9 @@ pub fn run(config: &TrackerConfig, job: &QualityJob) -> Result<Vec<Trial>> {
     let mut judged = config.clone();
     judged.params.min_quality = 0.0;
     judged.params.min_quality_initialise = 0.0;
-    let mut tracker = load_tracker(&judged, cam.width as usize, cam.height as usize)?;
-    let world_from_model = load(&config.objects[0].model)?.world_from_model();
+    let models = load_models(&judged)?;
+    let world_from_model = models.world_from_model[0];
+    let mut tracker = tracker_for(&judged, models.objects, cam.width as usize, cam.height as usize)?;
     let pool = thread_pool(config.threads)?;
     let mut out = StepOutput::new(tracker.len());
     let start =

@@ -88,7 +88,7 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
     let mut frames = ReadAhead::start(reader, job.qvga).context("starting the reader thread")?;
     let pool = thread_pool(config.threads)?;
     // While the reader thread reads the first frame (which sizes the tracker).
-    let models = pool.install(|| load_models(config))?;
+    let models = pool.install(|| load_models(config))?.objects;
     let names: Vec<String> = config.objects.iter().map(|o| o.name.clone()).collect();
     // Written next to the target and renamed when finished, also after an error, so
     // the poses computed before it are kept.

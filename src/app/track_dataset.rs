@@ -5,14 +5,13 @@ use super::dataset::thread_pool;
 use super::interrupt::{Interrupted, Stop};
 use super::poses_client::{object_trajectory_header, object_trajectory_path};
 use super::report::{percentile, progress_bar};
-use super::tracking::{StepOutput, invalid_frame, load_tracker, track_frame};
+use super::tracking::{StepOutput, invalid_frame, load_models, track_frame, tracker_for};
 use crate::eval::{ErrorStats, align_rigid};
 use crate::geometry::Pose;
 use crate::io::camera_file::read_camera;
 use crate::io::frames::FrameLoader;
 use crate::io::tracker_config::TrackerConfig;
 use crate::io::tum::{TumDataset, format_stamp, write_trajectory};
-use crate::model::load;
 use crate::tracking::TrackingStatus;
 use anyhow::{Context, Result, bail};
 use std::path::PathBuf;
@@ -85,9 +84,9 @@ pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<TrackDataset
     }
     let mut loader = FrameLoader::new(camera, job.qvga);
     let cam = loader.camera();
-    let mut tracker = load_tracker(config, cam.width as usize, cam.height as usize)?;
-    let world_from_model: Vec<Pose> =
-        config.objects.iter().map(|o| load(&o.model).map(|m| m.world_from_model())).collect::<Result<_, _>>()?;
+    let models = load_models(config)?;
+    let world_from_model = models.world_from_model;
+    let mut tracker = tracker_for(config, models.objects, cam.width as usize, cam.height as usize)?;
     let gt_at = |stamp_ns: u64| dataset.groundtruth.as_ref().and_then(|g| g.interpolate(stamp_ns as f64 * 1e-9, 0.05));
     if job.start_at_ground_truth {
         let world_from_camera =

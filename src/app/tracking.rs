@@ -2,6 +2,7 @@
 //! models into a [`Tracker`], and the timed per-frame step.
 
 use crate::frame::RgbdFrame;
+use crate::geometry::Pose;
 use crate::io::tracker_config::TrackerConfig;
 use crate::io::wire::{self, ObjectPose};
 use crate::model::load;
@@ -12,16 +13,28 @@ use std::time::Instant;
 /// Loads every configured model (clear errors naming the file) and allocates the
 /// tracker for frames up to `max_width × max_height`.
 pub fn load_tracker(config: &TrackerConfig, max_width: usize, max_height: usize) -> Result<Tracker> {
-    tracker_for(config, load_models(config)?, max_width, max_height)
+    tracker_for(config, load_models(config)?.objects, max_width, max_height)
+}
+
+/// The configured models, loaded and checked, in the configuration's order.
+pub struct LoadedModels {
+    /// What the tracker needs of each.
+    pub objects: Vec<ObjectModel>,
+    /// Each model file's `world_from_model` (where its frame lay in the mapping run).
+    pub world_from_model: Vec<Pose>,
 }
 
 /// Loads and checks every configured model, with errors naming the object and the file.
-pub fn load_models(config: &TrackerConfig) -> Result<Vec<ObjectModel>> {
-    let mut models = Vec::with_capacity(config.objects.len());
+pub fn load_models(config: &TrackerConfig) -> Result<LoadedModels> {
+    let mut loaded = LoadedModels {
+        objects: Vec::with_capacity(config.objects.len()),
+        world_from_model: Vec::with_capacity(config.objects.len()),
+    };
     for o in &config.objects {
         let model = load(&o.model).with_context(|| format!("loading the model of object '{}'", o.name))?;
         let extent = model.extent().with_context(|| format!("model {} cannot be tracked", o.model.display()))?;
-        models.push(ObjectModel {
+        loaded.world_from_model.push(model.world_from_model());
+        loaded.objects.push(ObjectModel {
             name: o.name.clone(),
             map: model.map,
             extent,
@@ -29,7 +42,7 @@ pub fn load_models(config: &TrackerConfig) -> Result<Vec<ObjectModel>> {
             search: o.search,
         });
     }
-    Ok(models)
+    Ok(loaded)
 }
 
 /// Allocates the tracker of `models` for frames up to `max_width × max_height`.
