@@ -289,9 +289,6 @@ pub fn tracking_ms(
     if decoded.is_empty() {
         bail!("no frames after --first-frame {first_frame}");
     }
-    let models = load_models(config)?;
-    let world_from_model = models.world_from_model;
-    let mut tracker = tracker_for(config, models.objects, cam.width as usize, cam.height as usize)?;
     let gt = dataset
         .groundtruth
         .as_ref()
@@ -302,9 +299,12 @@ pub fn tracking_ms(
     // itself worker 0 of the pool, so that each frame's work starts on that thread
     // instead of being handed to a pool thread (which, after an idle gap, may wake
     // late). rayon cannot release a thread from a pool it joined: the loop gets a
-    // thread of its own.
-    let timed = |tracker: &mut crate::tracking::Tracker| -> Result<Vec<(f64, f64)>> {
+    // thread of its own. The models load on that pool too.
+    let timed = || -> Result<Vec<(f64, f64)>> {
         let pool = super::dataset::thread_pool_on_this_thread(job.threads)?;
+        let models = pool.install(|| load_models(config))?;
+        let world_from_model = models.world_from_model;
+        let tracker = &mut tracker_for(config, models.objects, cam.width as usize, cam.height as usize)?;
         let mut out = StepOutput::new(tracker.len());
         let mut ms = Vec::new();
         for _ in 0..job.passes {
@@ -323,7 +323,7 @@ pub fn tracking_ms(
         Ok(ms)
     };
     let mut ms = std::thread::scope(|s| {
-        s.spawn(|| timed(&mut tracker)).join().map_err(|_| anyhow::anyhow!("the tracking benchmark's thread failed"))
+        s.spawn(timed).join().map_err(|_| anyhow::anyhow!("the tracking benchmark's thread failed"))
     })??;
     if ms.is_empty() {
         bail!("no tracking frames timed (--passes 0?)");

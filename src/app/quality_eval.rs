@@ -74,10 +74,10 @@ pub fn run(config: &TrackerConfig, job: &QualityJob) -> Result<Vec<Trial>> {
     let mut judged = config.clone();
     judged.params.min_quality = 0.0;
     judged.params.min_quality_initialise = 0.0;
-    let models = load_models(&judged)?;
+    let pool = thread_pool(config.threads)?;
+    let models = pool.install(|| load_models(&judged))?;
     let world_from_model = models.world_from_model[0];
     let mut tracker = tracker_for(&judged, models.objects, cam.width as usize, cam.height as usize)?;
-    let pool = thread_pool(config.threads)?;
     let mut out = StepOutput::new(tracker.len());
     let start =
         gt.interpolate(frames[0].depth_stamp_ns as f64 * 1e-9, 0.05).context("no ground truth at the first frame")?;

@@ -84,7 +84,8 @@ pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<TrackDataset
     }
     let mut loader = FrameLoader::new(camera, job.qvga);
     let cam = loader.camera();
-    let models = load_models(config)?;
+    let pool = thread_pool(config.threads)?;
+    let models = pool.install(|| load_models(config))?;
     let world_from_model = models.world_from_model;
     let mut tracker = tracker_for(config, models.objects, cam.width as usize, cam.height as usize)?;
     let gt_at = |stamp_ns: u64| dataset.groundtruth.as_ref().and_then(|g| g.interpolate(stamp_ns as f64 * 1e-9, 0.05));
@@ -95,7 +96,6 @@ pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<TrackDataset
             tracker.reinitialise(k, &(world_from_camera.inverse() * w));
         }
     }
-    let pool = thread_pool(config.threads)?;
     let mut out = StepOutput::new(tracker.len());
     let mut results: Vec<ObjectResult> =
         tracker.names().iter().map(|n| ObjectResult { name: n.clone(), ..Default::default() }).collect();
