@@ -5,7 +5,8 @@
 //! (four independent integer chains, no memory traffic) is timed on one thread, then on
 //! `threads` threads at once, each doing the same work. If every thread got its own
 //! core, both take the same time and the capacity is `threads`; with one core shared by
-//! two threads it is about 1.
+//! two threads it is about 1. The one-thread time itself says how fast a core is now:
+//! on a virtual machine the same core can run at half speed while its host is busy.
 
 use std::hint::black_box;
 use std::time::{Duration, Instant};
@@ -42,19 +43,43 @@ fn timed(threads: usize) -> Duration {
     t.elapsed()
 }
 
-/// The parallel capacity available to `threads` threads now: `threads · t₁ / tₙ`, the
-/// median of three rounds (about 0.1 s in all for two threads). 1 thread gives 1.
-pub fn parallel_capacity(threads: usize) -> f64 {
+/// What the cores gave during a probe.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Capacity {
+    /// `threads · t₁ / tₙ`: how many cores the threads really had (1 for one thread).
+    pub parallel: f64,
+    /// The kernel's time on one thread (ms, median): the speed of one core now. On a
+    /// shared host the same core may be twice as slow in a busy hour; compare it with
+    /// the figure of a quiet moment on the same machine (docs/benchmarks.md).
+    pub one_thread_ms: f64,
+}
+
+/// The capacity available to `threads` threads now: the median of three rounds of one
+/// thread, then all threads (about 0.1 s in all for two threads).
+pub fn probe(threads: usize) -> Capacity {
     let threads = threads.max(1);
-    if threads == 1 {
-        return 1.0;
-    }
-    let ratios: Vec<f64> = (0..ROUNDS)
-        .map(|_| {
-            let one = timed(1).as_secs_f64();
+    let mut ones = Vec::with_capacity(ROUNDS);
+    let mut ratios = Vec::with_capacity(ROUNDS);
+    for _ in 0..ROUNDS {
+        let one = timed(1).as_secs_f64();
+        ones.push(one * 1e3);
+        if threads > 1 {
             let all = timed(threads).as_secs_f64();
-            threads as f64 * one / all.max(f64::MIN_POSITIVE)
-        })
-        .collect();
-    super::report::percentile(&ratios, 0.5)
+            ratios.push(threads as f64 * one / all.max(f64::MIN_POSITIVE));
+        }
+    }
+    let parallel = if threads == 1 { 1.0 } else { super::report::percentile(&ratios, 0.5) };
+    Capacity { parallel, one_thread_ms: super::report::percentile(&ones, 0.5) }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn one_thread_has_one_core_and_takes_time() {
+        let c = probe(1);
+        assert_eq!(c.parallel, 1.0);
+        assert!(c.one_thread_ms > 0.0 && c.one_thread_ms.is_finite(), "{c:?}");
+    }
 }
