@@ -104,11 +104,15 @@ impl<F: WireFrame> LiveTracker<F> {
     /// stays one for good (rayon 1.13 cannot release a thread from a pool it joined), so a
     /// thread can start one `LiveTracker`; another start on it is an error.
     pub fn start(config: &TrackerConfig) -> Result<Self> {
+        // The models load on a pool of their own, whose threads end with it (rayon's
+        // global pool would keep two idle threads for good), and before this thread joins
+        // the tracker's pool: a start whose models fail to load leaves the thread free.
+        let tracker = super::dataset::thread_pool(config.threads)?
+            .install(|| load_tracker(config, F::WIDTH as usize, F::HEIGHT as usize))?;
         // The calling thread joins the pool as worker 0, so that the parallel work it
         // starts each frame is not injected from outside (rayon allocates for that).
-        // `run` must be called on this thread. The models load on the same pool.
+        // `run` must be called on this thread.
         let pool = super::dataset::thread_pool_on_this_thread(config.threads)?;
-        let tracker = pool.install(|| load_tracker(config, F::WIDTH as usize, F::HEIGHT as usize))?;
         let node = ipc::node("mrsmap_tracker")?;
         let frames_name = config.frame_size.service(&config.camera_service);
         let frames = ipc::frames::<F>(&node, &frames_name)?;
