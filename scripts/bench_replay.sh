@@ -2,7 +2,8 @@
 # Replay throughput, end to end (reading, decoding, tracking one object, writing poses):
 # fr3_teddy_first200 frames 100-199 as a VGA ROS 2 recording (16UC1 depth, zstd), replayed
 # three times at 2 and at 1 worker threads; also reading + decoding alone (--every with a
-# huge step decodes every frame and tracks only the first). Prints Markdown rows.
+# huge step decodes every frame and tracks only the first). Prints Markdown rows, then how
+# fast one core ran `mrsmap bench`'s probe loop before and after (a slowed host shows there).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 DATA=${DATA:-../shared/data/tum/fr3_teddy_first200}
@@ -11,6 +12,11 @@ OUT=$(mktemp -d)
 trap 'rm -rf "$OUT"' EXIT
 B=target/release/mrsmap
 $B convert tum-to-mcap "$DATA" --first-frame 100 --out "$OUT/rec.mcap" >/dev/null
+probe() {
+    $B bench --dataset tests/data/fr3_teddy_8 --camera robot_config/cameras/tum_fr3.toml --frames 2 --passes 1 \
+        --resolution qvga --graph-key-views 0 | sed -n 's/.*one thread ran it in \([0-9.]*\) ms before.*/\1/p'
+}
+probe_before=$(probe)
 echo "| run | threads | frames/s end to end | after the first frame | tracking median ms | peak RSS MB |"
 echo "|---|---|---|---|---|---|"
 for threads in 2 1; do
@@ -30,3 +36,5 @@ start=$(date +%s.%N)
 end=$(date +%s.%N)
 frames=$(python3 -c "print(len([l for l in open('$DATA/associations.txt') if l.strip() and not l.startswith('#')]) - 100)")
 echo "| read + decode only (process start and model load included) | - | $(python3 -c "print(round($frames / ($end - $start), 1))") | - | - | $(( $(cat "$OUT/rss") / 1024 )) |"
+echo
+echo "probe loop on one core: $probe_before ms before, $(probe) ms after (docs/benchmarks.md: this machine's quiet figure)"
