@@ -99,10 +99,11 @@ pub enum Command {
     /// Time map building and registration per frame at VGA and QVGA (images decoded
     /// beforehand, not timed); prints a Markdown table.
     ///
-    /// Before and after the runs it measures how much of the requested threads the
-    /// machine really gives (a fixed arithmetic loop on all threads against one): on a
-    /// shared computer or a virtual machine another load can take a core, and then the
-    /// times are slower than the machine can be. Record that line with the figures.
+    /// Before and after the runs it times a fixed arithmetic loop on one thread (how fast
+    /// a core is now: on a virtual machine a busy host can halve it) and on all threads
+    /// against one (how many of the requested threads really got a core: another load
+    /// can take one). When either falls short, the times are slower than the machine
+    /// can be. Record those lines with the figures.
     ///
     /// It also prints the instruction set the binary was compiled for: a build for the
     /// robot's own CPU (`RUSTFLAGS="-C target-cpu=native" cargo build --release`) is
