@@ -276,7 +276,7 @@ pub fn tracking_ms(
     half: bool,
     gap: std::time::Duration,
 ) -> Result<TrackingTimes> {
-    use super::tracking::{StepOutput, load_models, track_frame, tracker_for};
+    use super::tracking::{LoadedTracker, StepOutput, load_tracker, track_frame};
     let camera = read_camera(&job.camera)?;
     let dataset = TumDataset::open(&job.dataset).with_context(|| format!("opening {}", job.dataset.display()))?;
     let mut loader = FrameLoader::new(camera, half);
@@ -302,9 +302,9 @@ pub fn tracking_ms(
     // thread of its own. The models load on that pool too.
     let timed = || -> Result<Vec<(f64, f64)>> {
         let pool = super::dataset::thread_pool_on_this_thread(job.threads)?;
-        let models = pool.install(|| load_models(config))?;
-        let world_from_model = models.world_from_model;
-        let tracker = &mut tracker_for(config, models.objects, cam.width as usize, cam.height as usize)?;
+        let LoadedTracker { mut tracker, world_from_model } =
+            load_tracker(config, &pool, cam.width as usize, cam.height as usize)?;
+        let tracker = &mut tracker;
         let mut out = StepOutput::new(tracker.len());
         let mut ms = Vec::new();
         for _ in 0..job.passes {

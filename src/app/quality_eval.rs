@@ -11,7 +11,7 @@
 //! flag for failures are reported per threshold.
 
 use super::dataset::thread_pool;
-use super::tracking::{StepOutput, load_models, track_frame, tracker_for};
+use super::tracking::{LoadedTracker, StepOutput, load_tracker, track_frame};
 use crate::eval::align_rigid;
 use crate::geometry::Pose;
 use crate::geometry::se3::left_increment;
@@ -75,9 +75,9 @@ pub fn run(config: &TrackerConfig, job: &QualityJob) -> Result<Vec<Trial>> {
     judged.params.min_quality = 0.0;
     judged.params.min_quality_initialise = 0.0;
     let pool = thread_pool(config.threads)?;
-    let models = pool.install(|| load_models(&judged))?;
-    let world_from_model = models.world_from_model[0];
-    let mut tracker = tracker_for(&judged, models.objects, cam.width as usize, cam.height as usize)?;
+    let LoadedTracker { mut tracker, world_from_model } =
+        load_tracker(&judged, &pool, cam.width as usize, cam.height as usize)?;
+    let world_from_model = world_from_model[0];
     let mut out = StepOutput::new(tracker.len());
     let start =
         gt.interpolate(frames[0].depth_stamp_ns as f64 * 1e-9, 0.05).context("no ground truth at the first frame")?;

@@ -5,7 +5,7 @@ use super::dataset::thread_pool;
 use super::interrupt::{Interrupted, Stop};
 use super::poses_client::{object_trajectory_header, object_trajectory_path};
 use super::report::{percentile, progress_bar};
-use super::tracking::{StepOutput, invalid_frame, load_models, track_frame, tracker_for};
+use super::tracking::{LoadedTracker, StepOutput, invalid_frame, load_tracker, track_frame};
 use crate::eval::{ErrorStats, align_rigid};
 use crate::geometry::Pose;
 use crate::io::camera_file::read_camera;
@@ -85,9 +85,8 @@ pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<TrackDataset
     let mut loader = FrameLoader::new(camera, job.qvga);
     let cam = loader.camera();
     let pool = thread_pool(config.threads)?;
-    let models = pool.install(|| load_models(config))?;
-    let world_from_model = models.world_from_model;
-    let mut tracker = tracker_for(config, models.objects, cam.width as usize, cam.height as usize)?;
+    let LoadedTracker { mut tracker, world_from_model } =
+        load_tracker(config, &pool, cam.width as usize, cam.height as usize)?;
     let gt_at = |stamp_ns: u64| dataset.groundtruth.as_ref().and_then(|g| g.interpolate(stamp_ns as f64 * 1e-9, 0.05));
     if job.start_at_ground_truth {
         let world_from_camera =

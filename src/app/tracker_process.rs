@@ -107,8 +107,9 @@ impl<F: WireFrame> LiveTracker<F> {
         // The models load on a pool of their own, whose threads end with it (rayon's
         // global pool would keep two idle threads for good), and before this thread joins
         // the tracker's pool: a start whose models fail to load leaves the thread free.
-        let tracker = super::dataset::thread_pool(config.threads)?
-            .install(|| load_tracker(config, F::WIDTH as usize, F::HEIGHT as usize))?;
+        let loading = super::dataset::thread_pool(config.threads)?;
+        let tracker = load_tracker(config, &loading, F::WIDTH as usize, F::HEIGHT as usize)?.tracker;
+        drop(loading); // its threads end here
         // The calling thread joins the pool as worker 0, so that the parallel work it
         // starts each frame is not injected from outside (rayon allocates for that).
         // `run` must be called on this thread.

@@ -10,10 +10,28 @@ use crate::tracking::{ObjectModel, PoseEstimate, Tracker};
 use anyhow::{Context, Result};
 use std::time::Instant;
 
-/// Loads every configured model (clear errors naming the file) and allocates the
-/// tracker for frames up to `max_width × max_height`.
-pub fn load_tracker(config: &TrackerConfig, max_width: usize, max_height: usize) -> Result<Tracker> {
-    tracker_for(config, load_models(config)?.objects, max_width, max_height)
+/// A tracker with its models loaded, and where each model's frame lay in its mapping
+/// run (for comparing poses with a dataset's ground truth).
+pub struct LoadedTracker {
+    /// The tracker, allocated for every frame it will see.
+    pub tracker: Tracker,
+    /// Each model file's `world_from_model`, in the configuration's order.
+    pub world_from_model: Vec<Pose>,
+}
+
+/// Loads every configured model on `pool` (the pool whose threads will also run the
+/// frames; rayon's global pool would otherwise start for the loading alone and keep its
+/// threads idle), with clear errors naming the file, and allocates the tracker for
+/// frames up to `max_width × max_height`.
+pub fn load_tracker(
+    config: &TrackerConfig,
+    pool: &rayon::ThreadPool,
+    max_width: usize,
+    max_height: usize,
+) -> Result<LoadedTracker> {
+    let models = pool.install(|| load_models(config))?;
+    let tracker = tracker_for(config, models.objects, max_width, max_height)?;
+    Ok(LoadedTracker { tracker, world_from_model: models.world_from_model })
 }
 
 /// The configured models, loaded and checked, in the configuration's order.
