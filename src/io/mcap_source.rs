@@ -6,14 +6,14 @@
 //! cut off before it was finished, or an unchunked file — is streamed from the start; if
 //! it is damaged, the messages before the damage are delivered and the damage reported.
 
+use super::mcap_stream::Streamed;
 use super::zstd_chunk::WholeChunkZstd;
-use mcap::sans_io::LinearReaderOptions;
 use mcap::sans_io::indexed_reader::{IndexedReadEvent, IndexedReader, IndexedReaderOptions};
 use mcap::sans_io::summary_reader::{SummaryReadEvent, SummaryReader, SummaryReaderOptions};
 use mcap::{Channel, McapError, Summary};
 use std::collections::HashMap;
 use std::fs::File;
-use std::io::{BufReader, Read, Seek, SeekFrom};
+use std::io::{Read, Seek, SeekFrom};
 use std::path::Path;
 use std::sync::Arc;
 
@@ -205,7 +205,7 @@ fn delivered_before(
 
 enum Source {
     Indexed(Box<Indexed>),
-    Streamed { reader: Box<mcap::io::MessageReader<BufReader<File>>>, topics: Vec<String> },
+    Streamed(Box<Streamed>),
 }
 
 /// Messages of the chosen topics of one MCAP file.
@@ -265,16 +265,13 @@ impl McapSource {
         let source = match indexed {
             Some((summary, reader)) => Source::Indexed(Box::new(Indexed::new(file, file_len, summary, topics, reader))),
             None => {
-                file.seek(SeekFrom::Start(0))?;
-                let options = LinearReaderOptions::default().with_record_length_limit(MAX_RECORD_BYTES);
-                let reader =
-                    mcap::io::MessageReader::new_with_options(BufReader::with_capacity(1 << 20, file), options);
-                Source::Streamed { reader: Box::new(reader), topics }
+                file.seek(SeekFrom::Start(mcap::MAGIC.len() as u64))?;
+                Source::Streamed(Box::new(Streamed::new(file, topics)))
             }
         };
         let mode = match source {
             Source::Indexed(_) => ReadMode::Indexed,
-            Source::Streamed { .. } => ReadMode::Streamed,
+            Source::Streamed(_) => ReadMode::Streamed,
         };
         Ok(McapSource { source, mode, counts, skipped: Vec::new(), done: false })
     }
@@ -317,7 +314,7 @@ impl McapSource {
                     other => break other,
                 }
             },
-            Source::Streamed { reader, topics } => next_streamed(reader, topics, &mut visit),
+            Source::Streamed(streamed) => streamed.next(&mut visit),
         };
         // The end, or damage that cannot be read past: the source is finished.
         if !matches!(next, Some(Ok(_))) {
@@ -328,26 +325,6 @@ impl McapSource {
 }
 
 type Next<R> = Option<Result<R, McapError>>;
-
-fn next_streamed<R>(
-    reader: &mut mcap::io::MessageReader<BufReader<File>>,
-    topics: &[String],
-    visit: &mut impl FnMut(RawMessage<'_>) -> R,
-) -> Next<R> {
-    loop {
-        match reader.next()? {
-            Err(e) => return Some(Err(e)),
-            Ok(message) if topics.iter().any(|t| *t == message.channel.topic) => {
-                return Some(Ok(visit(RawMessage {
-                    channel: message.channel,
-                    log_time_ns: message.log_time,
-                    data: &message.data,
-                })));
-            }
-            Ok(_) => {}
-        }
-    }
-}
 
 #[cfg(test)]
 mod tests {

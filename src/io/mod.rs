@@ -8,6 +8,7 @@ pub mod image;
 pub mod image_msg;
 pub mod ipc;
 pub mod mcap_source;
+mod mcap_stream;
 pub mod mcap_write;
 pub mod object_file;
 pub mod recording;
