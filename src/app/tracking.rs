@@ -19,10 +19,9 @@ pub struct LoadedTracker {
     pub world_from_model: Vec<Pose>,
 }
 
-/// Loads every configured model on `pool` (the pool whose threads will also run the
-/// frames; rayon's global pool would otherwise start for the loading alone and keep its
-/// threads idle), with clear errors naming the file, and allocates the tracker for
-/// frames up to `max_width × max_height`.
+/// Loads every configured model on `pool` (rayon's global pool would otherwise start for
+/// the loading alone and keep its threads idle for good), with clear errors naming the
+/// file, and allocates the tracker for frames up to `max_width × max_height`.
 pub fn load_tracker(
     config: &TrackerConfig,
     pool: &rayon::ThreadPool,
