@@ -342,8 +342,9 @@ mod tests {
         (bytes, chunk)
     }
 
-    /// Streams `bytes` (written to a file): the log times of the messages, checked against
-    /// their payloads, and how it ended.
+    /// Streams `bytes` (written to a file named after `name`, which must be unique
+    /// among the tests: they run in parallel): the log times of the messages, checked
+    /// against their payloads, and how it ended.
     fn stream(bytes: &[u8], name: &str) -> (Vec<u64>, Option<McapError>) {
         let path = std::env::temp_dir().join(format!("mrsmap-stream-{name}-{}.mcap", std::process::id()));
         std::fs::write(&path, bytes).expect("write");
@@ -373,7 +374,7 @@ mod tests {
     fn reads_every_message_of_an_intact_file() {
         for (compression, name) in COMPRESSIONS {
             let (bytes, _) = one_chunk(compression, 20);
-            let (times, end) = stream(&bytes, name);
+            let (times, end) = stream(&bytes, &format!("intact-{name}"));
             assert_eq!(times, (0..20).collect::<Vec<u64>>(), "{name}");
             assert!(end.is_none(), "{name}: {end:?}");
         }
@@ -386,7 +387,7 @@ mod tests {
             let (bytes, chunk) = one_chunk(compression, 100);
             let len = u64::from_le_bytes(bytes[chunk + 1..chunk + 9].try_into().expect("8 bytes")) as usize;
             let cut = chunk + OPCODE_LEN_SIZE + len * 6 / 10;
-            let (times, end) = stream(&bytes[..cut], name);
+            let (times, end) = stream(&bytes[..cut], &format!("cut-{name}"));
             assert!((3..100).contains(&times.len()), "{name}: {} messages", times.len());
             assert_eq!(times, (0..times.len() as u64).collect::<Vec<u64>>(), "{name}");
             assert!(matches!(end, Some(McapError::UnexpectedEof)), "{name}: {end:?}");
