@@ -8,7 +8,9 @@
 
 mod common;
 
-use common::counting_alloc::{Counting, RECORDER_ALLOCATIONS, count_recorder_apart, start_counting, stop_counting};
+use common::counting_alloc::{
+    Counting, RECORDER_ALLOCATIONS, count_recorder_apart, first_allocation, start_counting, stop_counting,
+};
 use common::*;
 use mrsmap::app::recorder::{RecordOptions, RecordStats};
 use mrsmap::app::tracker_process::{LiveTracker, RunLimits, StopReason};
@@ -80,13 +82,23 @@ fn the_live_loop_with_a_recording_allocates_nothing_per_frame() {
     // A ring: nothing on any thread. The clip spans 0.23 s and loops (its stamps jump
     // back): a 0.1 s window.
     let (allocations, _, stats, path) = record_live("recloop-ring", Some(0.1), false);
-    assert_eq!(allocations, 0, "allocations in {COUNTED} frames with a ring recording");
+    assert_eq!(
+        allocations,
+        0,
+        "allocations in {COUNTED} frames with a ring recording; the first on {}",
+        first_allocation()
+    );
     assert!(stats.written >= 1 && stats.written <= 8, "the last 0.1 s: {stats:?}");
     assert_eq!(frames_in(&path), stats.written);
     // The whole run: the writer thread compresses and writes (and allocates for it);
     // the loop and the tracker's workers allocate nothing.
     let (allocations, writer_allocations, stats, path) = record_live("recloop-whole", None, true);
-    assert_eq!(allocations, 0, "allocations off the writer thread in {COUNTED} frames, whole-run recording");
+    assert_eq!(
+        allocations,
+        0,
+        "allocations off the writer thread in {COUNTED} frames, whole-run recording; the first on {}",
+        first_allocation()
+    );
     assert!(writer_allocations > 0, "the writer's allocations are counted apart, not lost");
     assert!(stats.written >= COUNTED, "the whole run: {stats:?}");
     assert_eq!(frames_in(&path), stats.written);

@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::counting_alloc::{Counting, start_counting, stop_counting};
+use common::counting_alloc::{Counting, first_allocation, start_counting, stop_counting};
 use common::*;
 use mrsmap::app::tracker_process::{LiveTracker, RunLimits, StopReason};
 use mrsmap::io::tracker_config::read_tracker_config;
@@ -45,5 +45,10 @@ fn the_live_loop_allocates_nothing_per_frame() {
     assert_eq!(summary.stop, StopReason::FrameLimit, "the driver kept sending");
     assert_eq!(counted_frames, COUNTED);
     assert!(tracking > 0, "the teddy was tracked in some frames");
-    assert_eq!(allocations, 0, "{allocations} heap allocations in {COUNTED} frames of the live loop");
+    assert_eq!(
+        allocations,
+        0,
+        "{allocations} heap allocations in {COUNTED} frames of the live loop; the first on {}",
+        first_allocation()
+    );
 }
