@@ -26,7 +26,8 @@ pub struct OdometryParams {
 impl Default for OdometryParams {
     fn default() -> Self {
         OdometryParams {
-            map: MapParams::default(),
+            // Frame maps are registered, never saved or fused: no colour scatter.
+            map: MapParams { color_scatter: false, ..MapParams::default() },
             registration: RegistrationParams::default(),
             constant_velocity: true,
         }

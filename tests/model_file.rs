@@ -65,6 +65,20 @@ fn round_trip_restores_the_map_exactly() {
     assert_eq!(encode(&back), bytes, "re-encoding is byte-identical");
 }
 
+/// A map built without its colour statistics (odometry's and the tracker's setting)
+/// is refused as a model, and nothing is written.
+#[test]
+fn a_map_without_colour_statistics_is_not_saved() {
+    let target = render_frame(&room(9), tiny_camera(), &mrsmap::geometry::Pose::identity());
+    let map = build_map_with(&target, mrsmap::map::MapParams { color_scatter: false, ..Default::default() });
+    let model = Model { map, ..golden_model() };
+    let path = temp_dir("no-colour").join("m.mrsm");
+    let err = mrsmap::model::save(&path, &model).expect_err("refused");
+    assert!(matches!(err, ModelError::NoColorScatter { .. }), "{err}");
+    assert!(err.to_string().contains("colour statistics"), "{err}");
+    assert!(!path.exists() && !path.with_extension("mrsm.partial").exists());
+}
+
 #[test]
 fn the_golden_model_still_reads_and_pins_the_format() {
     let path = golden_path();

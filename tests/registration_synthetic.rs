@@ -45,6 +45,32 @@ fn register_pair_with(
     Ok((t, deg, r.associations))
 }
 
+/// A map without the colour rows of the scatter (`MapParams::color_scatter` off, as in
+/// odometry and tracking) has the same surfels, bit for bit, as the map with them; only
+/// its colour rows are zero.
+#[test]
+fn maps_without_colour_scatter_have_the_same_surfels() {
+    use mrsmap::map::MapParams;
+    let frame = render_frame(&room(3), vga(), &Pose::identity());
+    let full = build_map_with(&frame, MapParams { color_scatter: true, ..MapParams::default() });
+    let position = build_map_with(&frame, MapParams { color_scatter: false, ..MapParams::default() });
+    assert!(full.surfels().iter().filter(|s| s.usable()).count() > 500);
+    assert_eq!(full.surfels(), position.surfels());
+    assert_eq!(full.normals(), position.normals());
+    assert_eq!(full.descriptors(), position.descriptors());
+    // The packed scatter's position block: (0,0) (0,1) (0,2) (1,1) (1,2) (2,2).
+    let position_block = [0, 1, 2, 6, 7, 11];
+    for (f, p) in full.stats().iter().zip(position.stats()) {
+        assert_eq!((f.count, f.sum), (p.count, p.sum));
+        for (k, (a, b)) in f.scatter.iter().zip(&p.scatter).enumerate() {
+            let expected = if position_block.contains(&k) { *a } else { 0.0 };
+            assert_eq!(b.to_bits(), expected.to_bits(), "scatter entry {k}");
+        }
+    }
+    let colour = full.stats().iter().filter(|s| s.count >= 10.0 && s.color_covariance().norm() > 0.0).count();
+    assert!(colour > 500, "the full map has colour scatter ({colour} surfels)");
+}
+
 #[test]
 fn recovers_small_random_motions_at_vga() {
     let mut rng = Pcg32::new(7);

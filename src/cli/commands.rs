@@ -79,10 +79,8 @@ pub fn track(a: TrackArgs) -> Result<ExitCode> {
 
 /// Default odometry parameters with the map resolution factor λ.
 pub fn odometry_params(lambda: f64) -> mrsmap::odometry::OdometryParams {
-    mrsmap::odometry::OdometryParams {
-        map: mrsmap::map::MapParams { lambda, ..Default::default() },
-        ..Default::default()
-    }
+    let defaults = mrsmap::odometry::OdometryParams::default();
+    mrsmap::odometry::OdometryParams { map: mrsmap::map::MapParams { lambda, ..defaults.map }, ..defaults }
 }
 
 /// `mrsmap odometry`.

@@ -12,12 +12,14 @@
 //!
 //! Each aggregate keeps, per view direction, the raw moments of `v = (1, p − r)` with
 //! `p = (x, y, z, L, α, β)` about its first point `r`: 28 sums of `upper(v vᵀ)`, in
-//! `f32`, which is exact enough because `p − r` is at most a cell across.
+//! `f32`, which is exact enough because `p − r` is at most a cell across. The sums of
+//! the position block come first; without `MapParams::color_scatter` only these 13
+//! (count, 6 sums, 6 products) are kept.
 
 use super::gate_cells::CellGate;
 use super::params::MAX_LEVELS;
 use super::region::{PixelGate, RowSpans};
-use super::stats::{PACKED6, SurfelStats};
+use super::stats::{PACKED6, SurfelStats, packed_index};
 use crate::frame::{PixelRay, RgbdFrame};
 use crate::geometry::color::rgb8_to_lab;
 
@@ -27,8 +29,21 @@ use super::tree::NONE;
 /// Rows per aggregation band.
 pub(crate) const BAND_ROWS: usize = 32;
 
-/// Raw moments of `upper(v vᵀ)` for `v = (1, p − r)`: count, 6 sums, 21 products.
+/// Raw moments of `upper(v vᵀ)` for `v = (1, p − r)`: count, 6 sums, 21 products in
+/// the order of [`PRODUCTS`].
 pub(crate) type Moments = [f32; 28];
+
+/// The products `(i, j)` of `p − r` in the order `Moments` holds them (from entry 7):
+/// the position block first, then the rows with colour.
+#[rustfmt::skip]
+const PRODUCTS: [(usize, usize); PACKED6] = [
+    (0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2),
+    (0, 3), (0, 4), (0, 5), (1, 3), (1, 4), (1, 5), (2, 3), (2, 4), (2, 5),
+    (3, 3), (3, 4), (3, 5), (4, 4), (4, 5), (5, 5),
+];
+
+/// Products of the position block (the first of [`PRODUCTS`]).
+const POSITION_PRODUCTS: usize = 6;
 
 /// Pixels of one cell, contiguous in the image, at their common maximum resolution.
 #[derive(Debug, Clone, Copy)]
@@ -52,8 +67,9 @@ pub(crate) struct Aggregate {
 }
 
 impl Aggregate {
-    /// The surfel statistics of view direction `dir`.
-    pub(crate) fn stats(&self, pool: &[Moments], dir: usize) -> SurfelStats {
+    /// The surfel statistics of view direction `dir`: in full with `color`, else with
+    /// the position block of the scatter only (`MapParams::color_scatter`).
+    pub(crate) fn stats(&self, pool: &[Moments], dir: usize, color: bool) -> SurfelStats {
         let m = &pool[self.moments[dir] as usize];
         let reference = self.reference.map(|v| v as f64);
         let mut sum_rel = [0.0; 6];
@@ -61,10 +77,15 @@ impl Aggregate {
             *s = m[1 + k] as f64;
         }
         let mut raw2 = [0.0; PACKED6];
-        for (k, r) in raw2.iter_mut().enumerate() {
-            *r = m[7 + k] as f64;
+        let kept = if color { PACKED6 } else { POSITION_PRODUCTS };
+        for (k, &(i, j)) in PRODUCTS.iter().enumerate().take(kept) {
+            raw2[packed_index(i, j)] = m[7 + k] as f64;
         }
-        SurfelStats::from_moments_about(&reference, m[0] as f64, &sum_rel, &raw2)
+        if color {
+            SurfelStats::from_moments_about(&reference, m[0] as f64, &sum_rel, &raw2)
+        } else {
+            SurfelStats::from_position_moments_about(&reference, m[0] as f64, &sum_rel, &raw2)
+        }
     }
 }
 
@@ -100,18 +121,26 @@ fn level_of(r2: f32, thresholds_r2: &[f32; MAX_LEVELS]) -> usize {
     level
 }
 
+/// Adds `v` to the moments: count, sums and the products of [`PRODUCTS`], with
+/// `color` all of them, else those of the position block.
 #[inline(always)]
-fn accumulate(m: &mut Moments, v: &[f32; 6]) {
+fn accumulate(m: &mut Moments, v: &[f32; 6], color: bool) {
     m[0] += 1.0;
     for i in 0..6 {
         m[1 + i] += v[i];
     }
-    let mut k = 7;
-    for i in 0..6 {
-        for j in i..6 {
-            m[k] += v[i] * v[j];
-            k += 1;
-        }
+    add_products::<0, POSITION_PRODUCTS>(m, v);
+    if color {
+        add_products::<POSITION_PRODUCTS, PACKED6>(m, v);
+    }
+}
+
+/// Adds the products `FROM..TO` of [`PRODUCTS`] (constant bounds: the loop unrolls
+/// into fixed indices).
+#[inline(always)]
+fn add_products<const FROM: usize, const TO: usize>(m: &mut Moments, v: &[f32; 6]) {
+    for (k, &(i, j)) in PRODUCTS.iter().enumerate().take(TO).skip(FROM) {
+        m[7 + k] += v[i] * v[j];
     }
 }
 
@@ -136,6 +165,8 @@ pub(crate) struct AggregationInput<'a> {
     pub inv_resolution: [f32; MAX_LEVELS],
     pub num_levels: usize,
     pub smooth_view_dirs: bool,
+    /// `MapParams::color_scatter`.
+    pub color_scatter: bool,
     /// Fusion: the points are placed in another frame and filtered; pixels on virtual
     /// borders are left out (their cells are seen only in part).
     pub placement: Option<Placement<'a>>,
@@ -226,17 +257,21 @@ impl Band {
     pub(crate) fn aggregate(&mut self, input: &AggregationInput) {
         // One copy of the pixel loop per kind of input, each without the branches (and
         // the register pressure) of the filters it does not have.
-        match (input.gate.is_some(), input.placement.is_some()) {
-            (false, false) => self.aggregate_rows::<false, false>(input),
-            (true, false) => self.aggregate_rows::<true, false>(input),
-            (false, true) => self.aggregate_rows::<false, true>(input),
-            (true, true) => self.aggregate_rows::<true, true>(input),
+        match (input.gate.is_some(), input.placement.is_some(), input.smooth_view_dirs) {
+            (false, false, false) => self.aggregate_rows::<false, false, false>(input),
+            (true, false, false) => self.aggregate_rows::<true, false, false>(input),
+            (false, true, false) => self.aggregate_rows::<false, true, false>(input),
+            (true, true, false) => self.aggregate_rows::<true, true, false>(input),
+            (false, false, true) => self.aggregate_rows::<false, false, true>(input),
+            (true, false, true) => self.aggregate_rows::<true, false, true>(input),
+            (false, true, true) => self.aggregate_rows::<false, true, true>(input),
+            (true, true, true) => self.aggregate_rows::<true, true, true>(input),
         }
     }
 
-    /// [`Self::aggregate`] with `GATED` = `input.gate.is_some()` and `PLACED` =
-    /// `input.placement.is_some()`.
-    fn aggregate_rows<const GATED: bool, const PLACED: bool>(&mut self, input: &AggregationInput) {
+    /// [`Self::aggregate`] with `GATED` = `input.gate.is_some()`, `PLACED` =
+    /// `input.placement.is_some()` and `SMOOTH` = `input.smooth_view_dirs`.
+    fn aggregate_rows<const GATED: bool, const PLACED: bool, const SMOOTH: bool>(&mut self, input: &AggregationInput) {
         self.aggregates.clear();
         self.moments.clear();
         self.dropped_points = 0;
@@ -270,7 +305,7 @@ impl Band {
                 let cell = if d == 0 {
                     (NO_CELL, NONE)
                 } else {
-                    self.pixel::<GATED, PLACED>(input, Pixel { depth: d, ray, flags, rgb }, u, first_row, scale)
+                    self.pixel::<GATED, PLACED, SMOOTH>(input, Pixel { depth: d, ray, flags, rgb }, u, first_row, scale)
                 };
                 self.cur[u] = cell;
             }
@@ -325,7 +360,7 @@ impl Band {
 
     /// Aggregates one pixel with a depth reading at column `u`.
     #[inline(always)]
-    fn pixel<const GATED: bool, const PLACED: bool>(
+    fn pixel<const GATED: bool, const PLACED: bool, const SMOOTH: bool>(
         &mut self,
         input: &AggregationInput,
         px: Pixel,
@@ -356,8 +391,7 @@ impl Band {
         {
             return (NO_CELL, NONE);
         }
-        let mut dirs = if input.smooth_view_dirs { ray.near_dirs } else { 1 << ray.best_dir };
-        let mut near_dirs = ray.near_dirs;
+        let (mut best_dir, mut near_dirs) = (ray.best_dir, ray.near_dirs);
         if PLACED && let Some(pl) = &input.placement {
             if flags & VIRTUAL_BORDER != 0 {
                 return (NO_CELL, NONE);
@@ -368,9 +402,7 @@ impl Band {
                 return (NO_CELL, NONE);
             }
             let view = (pl.rotation * pc).normalize();
-            let (best, near) = crate::frame::rays::view_dirs_of([view.x, view.y, view.z]);
-            dirs = if input.smooth_view_dirs { near } else { 1 << best };
-            near_dirs = near;
+            (best_dir, near_dirs) = crate::frame::rays::view_dirs_of([view.x, view.y, view.z]);
             (x, y, z) = (pm.x, pm.y, pm.z);
         }
         let (key, packed) = if PLACED {
@@ -420,8 +452,9 @@ impl Band {
             moments: &mut self.moments,
             capacity: self.moments_capacity,
             dropped: &mut self.dropped_points,
+            color: input.color_scatter,
         };
-        pool.accumulate(aggregate, dirs, &rel);
+        pool.accumulate::<SMOOTH>(aggregate, best_dir, near_dirs, &rel);
         (packed, agg)
     }
 }
@@ -432,27 +465,37 @@ struct MomentsPool<'a> {
     capacity: usize,
     /// Points dropped because the pool is full.
     dropped: &'a mut u32,
+    /// Sum the colour rows too (`MapParams::color_scatter`).
+    color: bool,
 }
 
 impl MomentsPool<'_> {
     /// Adds the point `rel` (relative to the aggregate's reference) to the aggregate's
-    /// moments of each view direction in `dirs`.
+    /// moments of its view directions: with `SMOOTH` every one in `near_dirs`, else
+    /// `best_dir` alone (§3.1).
     #[inline(always)]
-    fn accumulate(mut self, aggregate: &mut Aggregate, dirs: u8, rel: &[f32; 6]) {
-        if dirs.is_power_of_two() {
+    fn accumulate<const SMOOTH: bool>(
+        mut self,
+        aggregate: &mut Aggregate,
+        best_dir: u8,
+        near_dirs: u8,
+        rel: &[f32; 6],
+    ) {
+        let dir = if SMOOTH && !near_dirs.is_power_of_two() { None } else { Some(best_dir as usize) };
+        if let Some(dir) = dir {
             // One view direction (always so without smoothing): no loop, so that the
             // products stay in registers.
-            if let Some(slot) = self.slot(aggregate, dirs.trailing_zeros() as usize) {
-                accumulate(&mut self.moments[slot as usize], rel);
+            if let Some(slot) = self.slot(aggregate, dir) {
+                accumulate(&mut self.moments[slot as usize], rel, self.color);
             }
             return;
         }
-        let mut remaining = dirs;
+        let mut remaining = near_dirs;
         while remaining != 0 {
             let dir = remaining.trailing_zeros() as usize;
             remaining &= remaining - 1;
             if let Some(slot) = self.slot(aggregate, dir) {
-                accumulate(&mut self.moments[slot as usize], rel);
+                accumulate(&mut self.moments[slot as usize], rel, self.color);
             }
         }
     }

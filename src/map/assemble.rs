@@ -180,7 +180,7 @@ impl Assembly {
     /// one pass over them would give, so the map does not depend on the thread count.
     fn insert_aggregates(&mut self, bands: &[Band], map: &mut SurfelMap) {
         self.order_by_level(map.tree.top_level());
-        let max_points = map.params.max_points;
+        let (max_points, color) = (map.params.max_points, map.params.color_scatter);
         let chunks = insert_chunks(&self.by_level, &self.target, &map.tree.nodes, map.surfels.len());
         let nodes = &map.tree.nodes;
         let mut work: heapless::Vec<InsertWork, MAX_INSERT_CHUNKS> = heapless::Vec::new();
@@ -211,7 +211,8 @@ impl Assembly {
                     }
                     let j = s as usize - chunk.first_surfel;
                     if stats[j].count < max_points {
-                        stats[j].merge(&agg.stats(&band.moments, dir));
+                        let add = agg.stats(&band.moments, dir, color);
+                        if color { stats[j].merge(&add) } else { stats[j].merge_position(&add) }
                     }
                     if view_dirs[j] == [0.0; 3] {
                         view_dirs[j] = agg.view_dir;
@@ -324,7 +325,7 @@ fn refill<T: Clone + Send + Sync>(v: &mut Vec<T>, value: T, n: usize) {
 /// Sums children into parents, level by level from the finest (so every inner node
 /// holds the statistics of all points below it). Parents of one level are independent.
 fn merge_bottom_up(map: &mut SurfelMap) {
-    let max_points = map.params.max_points;
+    let (max_points, color) = (map.params.max_points, map.params.color_scatter);
     let top = map.tree.top_level();
     let nodes = &map.tree.nodes;
     let surfels = &map.surfels;
@@ -350,7 +351,7 @@ fn merge_bottom_up(map: &mut SurfelMap) {
                         }
                         let j = cs as usize - end;
                         if st.count < max_points {
-                            st.merge(&finer[j]);
+                            if color { st.merge(&finer[j]) } else { st.merge_position(&finer[j]) }
                         }
                         if *vd == [0.0; 3] {
                             *vd = vd_finer[j];
@@ -440,7 +441,7 @@ mod tests {
                 let node = map.tree.nodes[t as usize];
                 for dir in (0..6).filter(|d| agg.dir_mask & (1 << d) != 0 && node.surfels[*d] != NONE) {
                     let s = node.surfels[dir] as usize;
-                    stats[s].merge(&agg.stats(&band.moments, dir));
+                    stats[s].merge(&agg.stats(&band.moments, dir, true));
                     if view_dirs[s] == [0.0; 3] {
                         view_dirs[s] = agg.view_dir;
                     }

@@ -201,6 +201,7 @@ impl MapBuilder {
             inv_resolution,
             num_levels: params.num_levels,
             smooth_view_dirs: params.smooth_view_dirs,
+            color_scatter: params.color_scatter,
             placement,
             cols: point_cols,
             gate: region.gate.as_ref(),

@@ -58,6 +58,13 @@ pub struct MapParams {
     pub descriptor_neighbor_weight: f32,
     /// Luminance and chrominance differences at which texture bins saturate (§3.2).
     pub texture_bin_threshold: f32,
+    /// Keep the colour rows of the joint 6-D scatter (§3.1): the colour covariance and
+    /// its cross-covariance with position. Maps that are saved or fused (key views,
+    /// models) need them. Registration does not read them (it uses the position
+    /// covariance and the mean colour), so odometry and the tracker's scene maps turn
+    /// this off: each pixel then adds to 13 sums instead of 28 (docs/benchmarks.md, stop
+    /// 40), and [`SurfelMap::stats`](super::SurfelMap::stats) holds zero colour rows.
+    pub color_scatter: bool,
 }
 
 impl Default for MapParams {
@@ -75,6 +82,7 @@ impl Default for MapParams {
             exclude_level_boundaries: true,
             descriptor_neighbor_weight: 0.1,
             texture_bin_threshold: 0.1,
+            color_scatter: true,
         }
     }
 }

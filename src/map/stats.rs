@@ -58,6 +58,19 @@ impl SurfelStats {
 
     /// Merges another set into this one by Eq. (1).
     pub fn merge(&mut self, other: &SurfelStats) {
+        self.merge_rows::<6>(other);
+    }
+
+    /// [`Self::merge`] for statistics that keep only the position block of the scatter
+    /// (`MapParams::color_scatter` off): the colour rows stay as they are (zero).
+    pub fn merge_position(&mut self, other: &SurfelStats) {
+        self.merge_rows::<3>(other);
+    }
+
+    /// Eq. (1) on the scatter entries `(i, j)` with `j < ROWS` (6: all of them; 3: the
+    /// position block); count and sums in full.
+    #[inline]
+    fn merge_rows<const ROWS: usize>(&mut self, other: &SurfelStats) {
         let (na, nb) = (self.count, other.count);
         if nb <= 0.0 {
             return;
@@ -74,7 +87,9 @@ impl SurfelStats {
         let mut idx = 0;
         for i in 0..6 {
             for j in i..6 {
-                self.scatter[idx] += other.scatter[idx] + d[i] * d[j] * f;
+                if j < ROWS {
+                    self.scatter[idx] += other.scatter[idx] + d[i] * d[j] * f;
+                }
                 idx += 1;
             }
         }
@@ -88,6 +103,28 @@ impl SurfelStats {
     /// `n`, `Σ (p − r)` and the packed `Σ (p − r)(p − r)ᵀ`. Used to convert the
     /// compact per-image aggregates (§3.3) into surfel statistics.
     pub fn from_moments_about(reference: &[f64; 6], count: f64, sum_rel: &[f64; 6], raw2_rel: &[f64; PACKED6]) -> Self {
+        Self::from_moments_rows::<6>(reference, count, sum_rel, raw2_rel)
+    }
+
+    /// [`Self::from_moments_about`] keeping only the position block of the scatter (the
+    /// colour rows are zero, and `raw2_rel`'s are not read).
+    pub fn from_position_moments_about(
+        reference: &[f64; 6],
+        count: f64,
+        sum_rel: &[f64; 6],
+        raw2_rel: &[f64; PACKED6],
+    ) -> Self {
+        Self::from_moments_rows::<3>(reference, count, sum_rel, raw2_rel)
+    }
+
+    /// The scatter entries `(i, j)` with `j < ROWS` from raw moments; the others zero.
+    #[inline]
+    fn from_moments_rows<const ROWS: usize>(
+        reference: &[f64; 6],
+        count: f64,
+        sum_rel: &[f64; 6],
+        raw2_rel: &[f64; PACKED6],
+    ) -> Self {
         if count <= 0.0 {
             return SurfelStats::EMPTY;
         }
@@ -96,13 +133,15 @@ impl SurfelStats {
         let mut scatter = [0.0; PACKED6];
         let mut idx = 0;
         for (i, &si) in sum_rel.iter().enumerate() {
-            for &mj in &mean_rel[i..] {
-                scatter[idx] = raw2_rel[idx] - si * mj;
+            for (j, &mj) in mean_rel.iter().enumerate().skip(i) {
+                if j < ROWS {
+                    scatter[idx] = raw2_rel[idx] - si * mj;
+                }
                 idx += 1;
             }
         }
         // The diagonal of a scatter matrix is non-negative; clamp rounding noise.
-        for i in 0..6 {
+        for i in 0..ROWS {
             let k = packed_index(i, i);
             scatter[k] = scatter[k].max(0.0);
         }
@@ -224,6 +263,46 @@ mod tests {
             prop_assert!((s.mean() - inc.mean()).norm() < 1e-9);
             prop_assert!((s.covariance() - inc.covariance()).norm() < 1e-9 * (1.0 + inc.covariance().norm()));
         }
+    }
+
+    /// Whether `(i, j)` of the packed scatter lies in the position block.
+    fn in_position_block(k: usize) -> bool {
+        (0..3).any(|i| (i..3).any(|j| packed_index(i, j) == k))
+    }
+
+    /// The position-only forms compute the position block as the full ones do, bit for
+    /// bit, and leave the colour rows zero.
+    #[test]
+    fn position_only_statistics_equal_the_position_block_of_the_full_ones() {
+        let mut rng = crate::synthetic::Pcg32::new(3);
+        let mut point =
+            || -> [f64; 6] { std::array::from_fn(|k| rng.uniform(-1.0, 1.0) + if k < 3 { 20.0 } else { 0.0 }) };
+        let moments = |points: &[[f64; 6]]| {
+            let r = points[0];
+            let (mut sum, mut raw2) = ([0.0; 6], [0.0; PACKED6]);
+            for p in points {
+                let d: [f64; 6] = std::array::from_fn(|k| p[k] - r[k]);
+                (0..6).for_each(|k| sum[k] += d[k]);
+                (0..6).for_each(|i| (i..6).for_each(|j| raw2[packed_index(i, j)] += d[i] * d[j]));
+            }
+            (r, points.len() as f64, sum, raw2)
+        };
+        let (a, b): (Vec<_>, Vec<_>) = ((0..17).map(|_| point()).collect(), (0..9).map(|_| point()).collect());
+        let ((ra, na, sa, qa), (rb, nb, sb, qb)) = (moments(&a), moments(&b));
+        let (mut full, other) =
+            (SurfelStats::from_moments_about(&ra, na, &sa, &qa), SurfelStats::from_moments_about(&rb, nb, &sb, &qb));
+        let (mut position, other_position) = (
+            SurfelStats::from_position_moments_about(&ra, na, &sa, &qa),
+            SurfelStats::from_position_moments_about(&rb, nb, &sb, &qb),
+        );
+        full.merge(&other);
+        position.merge_position(&other_position);
+        assert_eq!((position.count, position.sum), (full.count, full.sum));
+        for k in 0..PACKED6 {
+            let expected = if in_position_block(k) { full.scatter[k] } else { 0.0 };
+            assert_eq!(position.scatter[k].to_bits(), expected.to_bits(), "entry {k}");
+        }
+        assert!(full.color_covariance().norm() > 0.0);
     }
 
     #[test]

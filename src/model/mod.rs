@@ -82,6 +82,13 @@ pub enum ModelError {
         /// Decoder message.
         message: String,
     },
+    /// The map to save keeps only the position block of its statistics
+    /// (`MapParams::color_scatter` off): a model needs the full 6-D statistics.
+    #[error("{path}: the map was built without its colour statistics (color_scatter off); a model needs them")]
+    NoColorScatter {
+        /// The file.
+        path: PathBuf,
+    },
     /// The decoded map is inconsistent.
     #[error("{path}: {source}")]
     Invalid {
@@ -178,6 +185,9 @@ fn split<'a>(bytes: &'a [u8], origin: &Path) -> Result<(ModelHeader, &'a [u8]), 
 /// Writes a model file atomically (to a temporary file, then renamed), so that a
 /// crash never leaves a half-written model in place of a good one.
 pub fn save(path: &Path, model: &Model) -> Result<(), ModelError> {
+    if !model.map.params().color_scatter {
+        return Err(ModelError::NoColorScatter { path: path.to_path_buf() });
+    }
     let io = |source| ModelError::Io { path: path.to_path_buf(), source };
     let tmp = path.with_extension("mrsm.partial");
     std::fs::write(&tmp, encode(model)).map_err(io)?;

@@ -150,6 +150,7 @@ impl MapParamsRecord {
             exclude_level_boundaries: self.exclude_level_boundaries,
             descriptor_neighbor_weight: self.descriptor_neighbor_weight,
             texture_bin_threshold: self.texture_bin_threshold,
+            color_scatter: true,
         }
     }
 }

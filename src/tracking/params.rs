@@ -39,7 +39,8 @@ pub struct TrackerParams {
 impl Default for TrackerParams {
     fn default() -> Self {
         TrackerParams {
-            map: MapParams::default(),
+            // Scene maps are registered, never saved or fused: no colour scatter.
+            map: MapParams { color_scatter: false, ..MapParams::default() },
             registration: RegistrationParams {
                 coarsest_level: 4,
                 lm_max_iterations: 10,
