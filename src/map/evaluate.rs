@@ -85,8 +85,34 @@ fn covariance_is_proper(cov: &Matrix3<f64>) -> bool {
     if !cov.iter().all(|v| v.is_finite()) {
         return false;
     }
+    if clearly_proper(cov) {
+        return true;
+    }
+    proper_by_eigenvalues(cov)
+}
+
+/// The test of [`covariance_is_proper`] on the eigenvalues `e₀ ≤ e₁ ≤ e₂`.
+fn proper_by_eigenvalues(cov: &Matrix3<f64>) -> bool {
     let e = crate::geometry::eigen3::symmetric_eigenvalues(cov);
     e[2] > 1e-14 && e[1] > 1e-6 * e[2] && e[0] > -1e-9 * e[2]
+}
+
+/// Whether [`proper_by_eigenvalues`] certainly holds, decided without eigenvalues (most
+/// surfels; the others take the eigenvalues). The characteristic polynomial
+/// `λ³ − Tλ² + Mλ − D` (trace, sum of principal 2×2 minors, determinant) of a
+/// symmetric matrix has only positive roots iff `T, M, D > 0`; then `e₂ ≤ T` and
+/// `M ≤ 3 e₁e₂`, so `M > 4·10⁻⁶ T²` gives `e₁ > 1.3·10⁻⁶ e₂`. The margins (`10⁻¹²` of
+/// the squared and cubed Frobenius norm) lie far beyond the rounding of `T, M, D`, and
+/// the 30 % and the positive `e₀` beyond the error of the computed eigenvalues (≲ 10⁻⁸
+/// of the norm where two coincide), so the decision is the same
+/// (`clearly_proper_never_contradicts_the_eigenvalues`).
+fn clearly_proper(c: &Matrix3<f64>) -> bool {
+    let (a, b, cc, d, e, f) = (c[(0, 0)], c[(0, 1)], c[(0, 2)], c[(1, 1)], c[(1, 2)], c[(2, 2)]);
+    let t = a + d + f;
+    let m = (a * d - b * b) + (a * f - cc * cc) + (d * f - e * e);
+    let det = a * (d * f - e * e) - b * (b * f - e * cc) + cc * (b * e - d * cc);
+    let norm2 = a * a + d * d + f * f + 2.0 * (b * b + cc * cc + e * e);
+    t > 6e-14 && m > 4e-6 * t * t + 1e-12 * norm2 && det > 1e-12 * norm2 * norm2.sqrt()
 }
 
 /// The node neighbourhoods (for §3.2) and the evaluation of every surfel (§3.1) side by
@@ -196,4 +222,57 @@ pub(crate) fn estimate_normals(map: &mut SurfelMap, raw: &[RawMoments]) {
             }
         },
     );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synthetic::Pcg32;
+    use nalgebra::Rotation3;
+
+    /// A rotated covariance with eigenvalues `scale · rel`.
+    fn covariance(rng: &mut Pcg32, scale: f64, rel: [f64; 3]) -> Matrix3<f64> {
+        let w = Vector3::new(rng.uniform(-3.0, 3.0), rng.uniform(-3.0, 3.0), rng.uniform(-3.0, 3.0));
+        let r = Rotation3::from_scaled_axis(w).into_inner();
+        r * Matrix3::from_diagonal(&Vector3::from(rel.map(|v| v * scale))) * r.transpose()
+    }
+
+    /// Whenever the shortcut decides, the eigenvalues decide the same: over planes,
+    /// needles, disks, near-isotropic cells and eigenvalues at and around each threshold,
+    /// at scales from far below to far above a surfel's.
+    #[test]
+    fn clearly_proper_never_contradicts_the_eigenvalues() {
+        let mut rng = Pcg32::new(17);
+        let near = |rng: &mut Pcg32, v: f64| v * (1.0 + rng.uniform(-1e-3, 1e-3));
+        let (mut decided, mut cases) = (0, 0);
+        for k in 0..200_000 {
+            let scale = 10f64.powf(rng.uniform(-16.0, 2.0));
+            let small = 10f64.powf(rng.uniform(-18.0, 0.0));
+            let rel = match k % 8 {
+                0 => [small, rng.uniform(0.1, 1.0), 1.0],                        // plane
+                1 => [small, near(&mut rng, small), 1.0],                        // needle
+                2 => [small, near(&mut rng, 1.0), 1.0],                          // disk
+                3 => [near(&mut rng, 1.0), near(&mut rng, 1.0), 1.0],            // isotropic
+                4 => [small, near(&mut rng, 1e-6) * rng.uniform(0.5, 2.0), 1.0], // e₁ at its threshold
+                5 => [-near(&mut rng, 1e-9) * rng.uniform(0.0, 3.0), rng.uniform(0.0, 1.0), 1.0], // e₀ at its
+                6 => [-small, rng.uniform(0.0, 1.0), 1.0],                       // slightly negative
+                _ => [rng.uniform(-1.0, 1.0), rng.uniform(-1.0, 1.0), 1.0],      // anything
+            };
+            let c = covariance(&mut rng, scale, rel);
+            cases += 1;
+            if clearly_proper(&c) {
+                decided += 1;
+                assert!(proper_by_eigenvalues(&c), "case {k}: {c:?} (eigenvalues {rel:?} × {scale:e})");
+            }
+        }
+        assert!(decided > cases / 4, "the shortcut decides a good share ({decided} of {cases})");
+    }
+
+    /// A surfel's usual covariance (a noisy plane of a 1.25 cm cell) takes the shortcut.
+    #[test]
+    fn a_surfel_of_a_plane_takes_the_shortcut() {
+        let mut rng = Pcg32::new(5);
+        let c = covariance(&mut rng, 1.3e-5, [1e-3, 0.8, 1.0]);
+        assert!(clearly_proper(&c) && proper_by_eigenvalues(&c));
+    }
 }
