@@ -483,8 +483,9 @@ impl MomentsPool<'_> {
     ) {
         let dir = if SMOOTH && !near_dirs.is_power_of_two() { None } else { Some(best_dir as usize) };
         if let Some(dir) = dir {
-            // One view direction (always so without smoothing): no loop, so that the
-            // products stay in registers.
+            // One view direction (always so without smoothing; a single direction within
+            // 67.5° of the ray is its closest): no loop, so that the products stay in
+            // registers.
             if let Some(slot) = self.slot(aggregate, dir) {
                 accumulate(&mut self.moments[slot as usize], rel, self.color);
             }
