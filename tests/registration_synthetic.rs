@@ -6,6 +6,7 @@ use common::*;
 use mrsmap::geometry::Pose;
 use mrsmap::geometry::se3::left_increment;
 use mrsmap::map::MapCapacity;
+use mrsmap::map::stats::packed_index;
 use mrsmap::registration::{RegistrationError, RegistrationParams, RegistrationWorkspace, register};
 use mrsmap::synthetic::{Pcg32, room};
 use nalgebra::Vector6;
@@ -58,8 +59,8 @@ fn maps_without_colour_scatter_have_the_same_surfels() {
     assert_eq!(full.surfels(), position.surfels());
     assert_eq!(full.normals(), position.normals());
     assert_eq!(full.descriptors(), position.descriptors());
-    // The packed scatter's position block: (0,0) (0,1) (0,2) (1,1) (1,2) (2,2).
-    let position_block = [0, 1, 2, 6, 7, 11];
+    // The packed scatter's position block: (i, j) with i ≤ j < 3.
+    let position_block: Vec<usize> = (0..3).flat_map(|i| (i..3).map(move |j| packed_index(i, j))).collect();
     for (f, p) in full.stats().iter().zip(position.stats()) {
         assert_eq!((f.count, f.sum), (p.count, p.sum));
         for (k, (a, b)) in f.scatter.iter().zip(&p.scatter).enumerate() {

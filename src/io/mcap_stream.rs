@@ -153,16 +153,24 @@ impl Streamed {
 
 /// Fills `buf` from `r` as far as it goes; returns the bytes read (fewer at the end).
 fn read_up_to(r: &mut impl Read, buf: &mut [u8]) -> McapResult<usize> {
+    let (n, result) = fill(r, buf);
+    result?;
+    Ok(n)
+}
+
+/// Reads into `buf` until it is full or `r` ends: the bytes read, and the error that
+/// stopped it early (retrying interrupted reads).
+fn fill(r: &mut impl Read, buf: &mut [u8]) -> (usize, std::io::Result<()>) {
     let mut n = 0;
     while n < buf.len() {
         match r.read(&mut buf[n..]) {
             Ok(0) => break,
             Ok(k) => n += k,
             Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-            Err(e) => return Err(e.into()),
+            Err(e) => return (n, Err(e)),
         }
     }
-    Ok(n)
+    (n, Ok(()))
 }
 
 /// Takes in a schema or channel record; hands a message of one of `topics` to `visit`.
@@ -301,14 +309,10 @@ fn decode_into(d: &mut impl Decompressor, src: &[u8], out: &mut [u8]) -> Decoded
 fn lz4_into(src: &[u8], out: &mut [u8]) -> Decoded {
     let error = |wrote: usize, e: std::io::Error| (wrote, McapError::DecompressionError(format!("lz4: {e}")));
     let mut decoder = lz4::Decoder::new(src).map_err(|e| error(0, e))?;
-    let mut wrote = 0;
-    while wrote < out.len() {
-        match decoder.read(&mut out[wrote..]) {
-            Ok(0) => return Err(error(wrote, std::io::ErrorKind::UnexpectedEof.into())),
-            Ok(k) => wrote += k,
-            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-            Err(e) => return Err(error(wrote, e)),
-        }
+    let (wrote, result) = fill(&mut decoder, out);
+    result.map_err(|e| error(wrote, e))?;
+    if wrote < out.len() {
+        return Err(error(wrote, std::io::ErrorKind::UnexpectedEof.into()));
     }
     Ok(wrote)
 }

@@ -212,7 +212,7 @@ impl Assembly {
                     let j = s as usize - chunk.first_surfel;
                     if stats[j].count < max_points {
                         let add = agg.stats(&band.moments, dir, color);
-                        if color { stats[j].merge(&add) } else { stats[j].merge_position(&add) }
+                        stats[j].merge_kept(&add, color);
                     }
                     if view_dirs[j] == [0.0; 3] {
                         view_dirs[j] = agg.view_dir;
@@ -351,7 +351,7 @@ fn merge_bottom_up(map: &mut SurfelMap) {
                         }
                         let j = cs as usize - end;
                         if st.count < max_points {
-                            if color { st.merge(&finer[j]) } else { st.merge_position(&finer[j]) }
+                            st.merge_kept(&finer[j], color);
                         }
                         if *vd == [0.0; 3] {
                             *vd = vd_finer[j];

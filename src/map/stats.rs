@@ -61,10 +61,12 @@ impl SurfelStats {
         self.merge_rows::<6>(other);
     }
 
-    /// [`Self::merge`] for statistics that keep only the position block of the scatter
-    /// (`MapParams::color_scatter` off): the colour rows stay as they are (zero).
-    pub fn merge_position(&mut self, other: &SurfelStats) {
-        self.merge_rows::<3>(other);
+    /// [`Self::merge`] of the scatter rows a map keeps: with `color` all of them, else
+    /// (`MapParams::color_scatter` off) the position block only, and the colour rows
+    /// stay as they are (zero).
+    #[inline]
+    pub fn merge_kept(&mut self, other: &SurfelStats, color: bool) {
+        if color { self.merge_rows::<6>(other) } else { self.merge_rows::<3>(other) }
     }
 
     /// Eq. (1) on the scatter entries `(i, j)` with `j < ROWS` (6: all of them; 3: the
@@ -296,7 +298,7 @@ mod tests {
             SurfelStats::from_position_moments_about(&rb, nb, &sb, &qb),
         );
         full.merge(&other);
-        position.merge_position(&other_position);
+        position.merge_kept(&other_position, false);
         assert_eq!((position.count, position.sum), (full.count, full.sum));
         for k in 0..PACKED6 {
             let expected = if in_position_block(k) { full.scatter[k] } else { 0.0 };
