@@ -4,9 +4,10 @@
 //! Each usable surfel of `a`, transformed into `b`, is compared with the surfels of `b`
 //! at the same level in the 3×3×3 cells around it whose view direction and normal agree
 //! (normals within 45°); the best gives the Mahalanobis distance `m²` of the means under
-//! `Σ = Σₐ' + Σ_b + a·res²·I`. The surfel's score is its log-likelihood gain over the
-//! floor of an unmatched surfel at `m² = χ²_floor`: `max(0, ½(χ²_floor − m²))`. A perfect
-//! match of a surfel with itself scores about `½(χ²_floor − 3)`; an unrelated map ≈ 0.
+//! `Σ = (Σₐ' + a·res²·I) + (Σ_b + a·res²·I)`, each surfel's covariance regularised. The
+//! surfel's score is its log-likelihood gain over the floor of an unmatched surfel at
+//! `m² = χ²_floor`: `max(0, ½(χ²_floor − m²))`. A perfect match of a surfel with itself
+//! scores about `½(χ²_floor − 3)`; an unrelated map ≈ 0.
 
 use super::associate::DirCandidates;
 use super::cost::{rotate_symmetric, symmetric_inverse};
