@@ -64,7 +64,6 @@ impl SurfelStats {
     /// [`Self::merge`] of the scatter rows a map keeps: with `color` all of them, else
     /// (`MapParams::color_scatter` off) the position block only, and the colour rows
     /// stay as they are (zero).
-    #[inline]
     pub fn merge_kept(&mut self, other: &SurfelStats, color: bool) {
         if color { self.merge_rows::<6>(other) } else { self.merge_rows::<3>(other) }
     }
