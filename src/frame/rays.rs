@@ -111,25 +111,91 @@ const RAY_BAND_ROWS: usize = 8;
 
 /// The rays of the rows from `first_row` on, `width` pixels each, into `band`.
 fn fill_band(camera: &CameraModel, first_row: usize, width: usize, band: &mut [PixelRay]) -> Result<(), CameraError> {
+    let distorted = camera.is_distorted();
+    let i = &camera.intrinsics;
     for (r, row) in band.chunks_exact_mut(width).enumerate() {
         let v = (first_row + r) as u32;
+        let y_pinhole = (f64::from(v) - i.cy) / i.fy;
         for (u, ray) in (0u32..).zip(row.iter_mut()) {
-            let (x, y) =
-                camera.unproject_normalized(u as f64, v as f64).ok_or(CameraError::NonInvertibleDistortion { u, v })?;
-            let range2 = x * x + y * y + 1.0;
-            let norm = range2.sqrt();
-            let dir = [(x / norm) as f32, (y / norm) as f32, (1.0 / norm) as f32];
-            let (best_dir, near_dirs) = view_dirs_of(dir);
-            *ray = PixelRay { x: x as f32, y: y as f32, range2_factor: range2 as f32, best_dir, near_dirs };
+            let (x, y) = if distorted {
+                camera
+                    .unproject_normalized(f64::from(u), f64::from(v))
+                    .ok_or(CameraError::NonInvertibleDistortion { u, v })?
+            } else {
+                // `unproject_normalized` without a lens: the same two quotients.
+                ((f64::from(u) - i.cx) / i.fx, y_pinhole)
+            };
+            *ray = pixel_ray(x, y);
         }
     }
     Ok(())
+}
+
+/// The ray through the normalised image point `(x, y)`.
+fn pixel_ray(x: f64, y: f64) -> PixelRay {
+    let range2 = x * x + y * y + 1.0;
+    let norm = range2.sqrt();
+    let dir = [(x / norm) as f32, (y / norm) as f32, (1.0 / norm) as f32];
+    let (best_dir, near_dirs) = view_dirs_of_finite(dir);
+    PixelRay { x: x as f32, y: y as f32, range2_factor: range2 as f32, best_dir, near_dirs }
+}
+
+/// [`view_dirs_of`] for a finite direction: its dot product with each signed unit axis
+/// is that component or its negation, exactly, so no products are needed.
+fn view_dirs_of_finite(dir: [f32; 3]) -> (u8, u8) {
+    let dots = [dir[0], -dir[0], dir[1], -dir[1], dir[2], -dir[2]];
+    let mut best = 0u8;
+    let mut mask = 0u8;
+    for (k, &dot) in dots.iter().enumerate() {
+        if dot > dots[best as usize] {
+            best = k as u8;
+        }
+        if dot > VIEW_DIR_SMOOTH_COS {
+            mask |= 1 << k;
+        }
+    }
+    (best, mask)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::geometry::PinholeIntrinsics;
+
+    #[test]
+    fn a_pinhole_table_holds_the_unprojected_rays() {
+        let camera = CameraModel {
+            width: 64,
+            height: 48,
+            intrinsics: PinholeIntrinsics { fx: 52.5, fy: 51.7, cx: 31.5, cy: 23.9 },
+            distortion: crate::geometry::NO_DISTORTION,
+            depth_scale_m: 1e-3,
+        };
+        let mut table = RayTable::with_capacity(64 * 48);
+        table.ensure(&camera).expect("pinhole");
+        for (p, ray) in table.rays().iter().enumerate() {
+            let (u, v) = ((p % 64) as f64, (p / 64) as f64);
+            let (x, y) = camera.unproject_normalized(u, v).expect("pinhole");
+            assert_eq!(*ray, pixel_ray(x, y), "pixel {p}");
+            assert_eq!(ray.range2_factor, table.range2_factors()[p]);
+        }
+    }
+
+    #[test]
+    fn the_closed_form_view_directions_equal_the_dot_products() {
+        let mut rng = 0x2545_f491_4f6c_dd1du64;
+        let mut next = || {
+            rng ^= rng << 13;
+            rng ^= rng >> 7;
+            rng ^= rng << 17;
+            (rng >> 40) as f32 / (1u64 << 23) as f32 * 2.0 - 1.0
+        };
+        let mut cases = vec![[0.0, 0.0, 1.0], [-0.0, 0.0, -1.0], [0.5, -0.5, 0.0], [VIEW_DIR_SMOOTH_COS, 0.0, 0.0]];
+        cases.extend((0..10_000).map(|_| [next(), next(), next()]));
+        for dir in cases {
+            assert_eq!(view_dirs_of_finite(dir), view_dirs_of(dir), "{dir:?}");
+        }
+    }
 
     #[test]
     fn a_lens_that_turns_back_within_the_image_is_refused() {
