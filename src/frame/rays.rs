@@ -136,12 +136,14 @@ fn pixel_ray(x: f64, y: f64) -> PixelRay {
     let range2 = x * x + y * y + 1.0;
     let norm = range2.sqrt();
     let dir = [(x / norm) as f32, (y / norm) as f32, (1.0 / norm) as f32];
+    // Absurd intrinsics (accepted by `validate`) can overflow the range: the components
+    // are then 0 or NaN, and both forms give axis 0 and no mask (tested).
     let (best_dir, near_dirs) = view_dirs_of_finite(dir);
     PixelRay { x: x as f32, y: y as f32, range2_factor: range2 as f32, best_dir, near_dirs }
 }
 
-/// [`view_dirs_of`] for a finite direction: its dot product with each signed unit axis
-/// is that component or its negation, exactly, so no products are needed.
+/// [`view_dirs_of`] without products: the dot product of a finite direction with each
+/// signed unit axis is that component or its negation, exactly.
 fn view_dirs_of_finite(dir: [f32; 3]) -> (u8, u8) {
     let dots = [dir[0], -dir[0], dir[1], -dir[1], dir[2], -dir[2]];
     let mut best = 0u8;
@@ -162,22 +164,37 @@ mod tests {
     use super::*;
     use crate::geometry::PinholeIntrinsics;
 
+    /// The ray of pixel `(u, v)` by the definitions: the camera's unprojection and the
+    /// view directions by dot products.
+    fn defined_ray(camera: &CameraModel, u: f64, v: f64) -> PixelRay {
+        let (x, y) = camera.unproject_normalized(u, v).expect("pinhole");
+        let range2 = x * x + y * y + 1.0;
+        let norm = range2.sqrt();
+        let (best_dir, near_dirs) = view_dirs_of([(x / norm) as f32, (y / norm) as f32, (1.0 / norm) as f32]);
+        PixelRay { x: x as f32, y: y as f32, range2_factor: range2 as f32, best_dir, near_dirs }
+    }
+
     #[test]
-    fn a_pinhole_table_holds_the_unprojected_rays() {
-        let camera = CameraModel {
-            width: 64,
-            height: 48,
-            intrinsics: PinholeIntrinsics { fx: 52.5, fy: 51.7, cx: 31.5, cy: 23.9 },
-            distortion: crate::geometry::NO_DISTORTION,
-            depth_scale_m: 1e-3,
-        };
-        let mut table = RayTable::with_capacity(64 * 48);
-        table.ensure(&camera).expect("pinhole");
-        for (p, ray) in table.rays().iter().enumerate() {
-            let (u, v) = ((p % 64) as f64, (p / 64) as f64);
-            let (x, y) = camera.unproject_normalized(u, v).expect("pinhole");
-            assert_eq!(*ray, pixel_ray(x, y), "pixel {p}");
-            assert_eq!(ray.range2_factor, table.range2_factors()[p]);
+    fn a_pinhole_table_holds_the_defined_rays() {
+        // A plausible camera, and one whose rays overflow (accepted by `validate`).
+        for fx in [52.5, 1e-300] {
+            let camera = CameraModel {
+                width: 64,
+                height: 48,
+                intrinsics: PinholeIntrinsics { fx, fy: 51.7, cx: 31.5, cy: 23.9 },
+                distortion: crate::geometry::NO_DISTORTION,
+                depth_scale_m: 1e-3,
+            };
+            let mut table = RayTable::with_capacity(64 * 48);
+            table.ensure(&camera).expect("pinhole");
+            for (p, ray) in table.rays().iter().enumerate() {
+                let expected = defined_ray(&camera, (p % 64) as f64, (p / 64) as f64);
+                // Bitwise, so that NaN compares equal to NaN.
+                let bits =
+                    |r: &PixelRay| (r.x.to_bits(), r.y.to_bits(), r.range2_factor.to_bits(), r.best_dir, r.near_dirs);
+                assert_eq!(bits(ray), bits(&expected), "fx {fx}, pixel {p}");
+                assert_eq!(ray.range2_factor.to_bits(), table.range2_factors()[p].to_bits());
+            }
         }
     }
 
