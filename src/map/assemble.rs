@@ -133,12 +133,18 @@ impl Assembly {
     /// nodes and all ancestors (§3.4 marks every level a border point lies in).
     fn propagate_node_flags(&self, bands: &[Band], map: &mut SurfelMap) {
         let nodes = &mut map.tree.nodes;
+        // The finest level of a contour node: every level from it up has one, since the
+        // flag reaches all ancestors.
+        let mut finest_contour = MAX_LEVELS;
         for (agg, &t) in self.aggregates(bands).zip(&self.target) {
             if t != NONE {
                 let n = &mut nodes[t as usize];
                 n.dir_mask |= agg.dir_mask;
                 n.excluded_dirs |= agg.excluded_dirs;
                 n.border |= agg.border;
+                if agg.border {
+                    finest_contour = finest_contour.min(n.level as usize);
+                }
             }
         }
         for level in 0..map.tree.top_level() {
@@ -150,6 +156,8 @@ impl Assembly {
                 p.border |= n.border;
             }
         }
+        let levels = (1u16 << map.tree.num_levels) - 1;
+        map.tree.contour_levels = (levels & !((1u16 << finest_contour) - 1)) as u8;
     }
 
     /// Fills `by_level`: a counting sort of the positions by level, coarsest first.

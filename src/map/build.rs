@@ -328,6 +328,33 @@ mod tests {
     }
 
     #[test]
+    fn the_contour_levels_are_those_of_the_nodes_flags() {
+        let camera = camera(160, 120);
+        let (rgb, mut depth) = wall(&camera);
+        // A box 0.8 m in front of the wall: its outline is a foreground contour (§3.4).
+        for (i, d) in depth.iter_mut().enumerate() {
+            if (30..90).contains(&(i / 160)) && (40..120).contains(&(i % 160)) {
+                *d -= 4000;
+            }
+        }
+        let frame = RgbdFrame::new(0, camera, &rgb, &depth).expect("consistent frame");
+        let capacity = MapCapacity::for_image(160 * 120);
+        let mut map = SurfelMap::new(MapParams::default(), capacity).expect("valid parameters");
+        let mut builder = MapBuilder::new(160, 120, capacity.surfels);
+        let scanned = |map: &SurfelMap| crate::map::tree::scan_contour_levels(map.nodes());
+        builder.build(&frame, &mut map).expect("builds");
+        assert_ne!(map.contour_levels(), 0, "the box's outline");
+        assert_eq!(map.contour_levels(), scanned(&map));
+        let restored = SurfelMap::restore(map.parts()).expect("consistent parts");
+        assert_eq!(restored.contour_levels(), scanned(&map));
+        // The same map rebuilt from the wall alone keeps none of them.
+        builder.build_region(&frame, &region(95..120, 0..160, 95..120, 0..160), &mut map).expect("builds");
+        assert!(!map.surfels().is_empty());
+        assert_eq!(map.contour_levels(), scanned(&map));
+        assert_eq!(map.contour_levels(), 0);
+    }
+
+    #[test]
     fn finding_a_cell_near_a_node_gives_the_node_found_by_descent() {
         let camera = camera(160, 120);
         let (rgb, depth) = wall(&camera);

@@ -181,7 +181,7 @@ impl SurfelMap {
     /// Bit `l` set if some node of level `l` lies on a foreground contour (§3.4). A map
     /// fused from many views has none: a contour is a property of one view.
     pub fn contour_levels(&self) -> u8 {
-        self.tree.nodes.iter().filter(|n| n.border).fold(0, |bits, n| bits | 1 << n.level)
+        self.tree.contour_levels
     }
 
     /// The node range of `level`.

@@ -119,6 +119,11 @@ fn hash_key(key: [i32; 3]) -> u64 {
     h ^ (h >> 29)
 }
 
+/// Bit `l` set if some node of level `l` has its `border` flag.
+pub(crate) fn scan_contour_levels(nodes: &[Node]) -> u8 {
+    nodes.iter().filter(|n| n.border).fold(0, |bits, n| bits | 1 << n.level)
+}
+
 impl CellHash {
     pub(crate) fn with_capacity(entries: usize) -> Self {
         let size = (entries * 2).next_power_of_two().max(64);
@@ -180,6 +185,10 @@ pub struct NodeArena {
     pub(crate) level_end: [u32; MAX_LEVELS],
     pub(crate) num_levels: usize,
     pub(crate) top: CellHash,
+    /// Bit `l` set if a node of level `l` lies on a foreground contour: kept with the
+    /// `border` flags (by `Assembly` and [`NodeArena::from_nodes`]), so that registration
+    /// need not scan the nodes for it.
+    pub(crate) contour_levels: u8,
     capacity: usize,
 }
 
@@ -192,6 +201,7 @@ impl NodeArena {
             level_end: [0; MAX_LEVELS],
             num_levels,
             top: CellHash::with_capacity(nodes.min(1 << 16)),
+            contour_levels: 0,
             capacity: nodes,
         }
     }
@@ -204,6 +214,7 @@ impl NodeArena {
         self.level_end = [0; MAX_LEVELS];
         self.num_levels = num_levels;
         self.top.clear();
+        self.contour_levels = 0;
     }
 
     /// An arena holding `nodes` (level by level, coarsest first, as given by the
@@ -224,8 +235,10 @@ impl NodeArena {
             top.get_or_insert(key, || Some(i))?;
         }
         let capacity = nodes.len();
+        let contour_levels = scan_contour_levels(&nodes);
         Some(NodeArena {
             neighbors: Vec::with_capacity(capacity),
+            contour_levels,
             nodes,
             level_start,
             level_end,
@@ -251,6 +264,7 @@ impl NodeArena {
             level_end: self.level_end,
             num_levels: self.num_levels,
             top,
+            contour_levels: self.contour_levels,
             capacity: self.nodes.len(),
         }
     }
