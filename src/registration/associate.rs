@@ -333,7 +333,7 @@ impl Search<'_> {
         let near =
             self.transformed.iter().map(|(_, _, p)| cell_distance2(p, key, self.res)).fold(f64::INFINITY, min_of);
         if near >= self.best {
-            self.second = self.second.min(near);
+            self.second = min_of(self.second, near);
             return;
         }
         self.test(m);
@@ -487,24 +487,25 @@ impl Search<'_> {
         known_empty: impl Fn([usize; 3]) -> bool,
         cell: impl Fn([usize; 3]) -> Option<(u32, [i32; 3])>,
     ) {
-        for (a, &dx) in slab[0].iter().enumerate().take(n[0]) {
+        // (`second` is never NaN, nor are the bounds: `min_of` is `f64::min` here.)
+        for (a, &dx) in slab[0][..n[0].min(5)].iter().enumerate() {
             if dx >= self.best {
-                self.second = self.second.min(dx);
+                self.second = min_of(self.second, dx);
                 continue;
             }
-            for (b, &dy) in slab[1].iter().enumerate().take(n[1]) {
+            for (b, &dy) in slab[1][..n[1].min(5)].iter().enumerate() {
                 let dxy = dx + dy;
                 if dxy >= self.best {
-                    self.second = self.second.min(dxy);
+                    self.second = min_of(self.second, dxy);
                     continue;
                 }
-                for (c, &dz) in slab[2].iter().enumerate().take(n[2]) {
+                for (c, &dz) in slab[2][..n[2].min(5)].iter().enumerate() {
                     if known_empty([a, b, c]) {
                         continue;
                     }
                     let d = dxy + dz;
                     if d >= self.best {
-                        self.second = self.second.min(d);
+                        self.second = min_of(self.second, d);
                         continue;
                     }
                     if let Some((m, key)) = cell([a, b, c]) {

@@ -120,25 +120,35 @@ fn best_match(
         return f64::INFINITY;
     };
     let mut best = f64::INFINITY;
+    // `min(best, χ²_floor)`: all that matters of an unmatched surfel is the floor.
+    let mut limit = CHI2_FLOOR;
     let fixed_trace = c.trace() + reg.trace();
     // The centre cell first: its surfels are the likeliest best, and the earlier a good
     // match is found, the more of the other candidates the bound below skips (the
     // minimum does not depend on the order).
-    let around = b.neighbors(center).iter().enumerate().filter(|&(k, &m)| k != SELF_NEIGHBOR && m != NONE);
-    for m in std::iter::once(center).chain(around.map(|(_, &m)| m)) {
+    let around = b.neighbors(center);
+    for k in std::iter::once(SELF_NEIGHBOR).chain((0..27).filter(|&k| k != SELF_NEIGHBOR)) {
+        let m = if k == SELF_NEIGHBOR { center } else { around[k] };
+        if m == NONE {
+            continue;
+        }
         let slots = &b.nodes()[m as usize].surfels;
-        for &sb in dirs.iter().map(|&k| &slots[k as usize]).filter(|&&s| s != NONE) {
+        for &k in dirs {
+            let sb = slots[k as usize];
+            if sb == NONE {
+                continue;
+            }
             let other = &b.surfels()[sb as usize];
             if !other.usable() {
                 continue;
             }
             let d = other.mean.cast::<f64>() - p;
             // `dᵀΣ⁻¹d ≥ |d|² / λ_max(Σ) ≥ |d|² / tr(Σ)` (Σ positive definite): a candidate
-            // whose bound cannot beat the best so far (or the floor, all that matters of an
-            // unmatched surfel) is skipped before the inverse. The margin covers rounding.
+            // whose bound cannot beat the best so far (or the floor) is skipped before
+            // the inverse. The margin covers rounding.
             let [xx, _, _, yy, _, zz] = other.cov_packed;
             let trace = fixed_trace + (xx + yy + zz) as f64;
-            if d.norm_squared() > best.min(CHI2_FLOOR) * trace * (1.0 + 1e-6) {
+            if d.norm_squared() > limit * trace * (1.0 + 1e-6) {
                 continue;
             }
             if normal.dot(&b.normals()[sb as usize]) < NORMAL_MIN_COS {
@@ -146,7 +156,15 @@ fn best_match(
             }
             let sigma = c + other.cov() + reg;
             let Some((inv, _)) = symmetric_inverse(&sigma) else { continue };
-            best = best.min(d.dot(&(inv * d)));
+            let m2 = d.dot(&(inv * d));
+            // As `best.min(m2)` and `best.min(χ²_floor)`, NaN included (a NaN `m2`
+            // leaves both as they were).
+            if m2 < best {
+                best = m2;
+                if m2 < limit {
+                    limit = m2;
+                }
+            }
         }
     }
     best
