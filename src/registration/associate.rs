@@ -147,8 +147,9 @@ impl Finer<'_> {
     }
 }
 
-/// A usable scene surfel of the node in work: index, mean, transformed mean.
-type Transformed = (u32, Vector3<f64>, Vector3<f64>);
+/// A usable scene surfel of the node in work: index, mean, transformed mean, view
+/// direction.
+type Transformed = (u32, Vector3<f64>, Vector3<f64>, u8);
 
 /// Associates one scene node: `a` is its association, `last_cube` its last cube search
 /// (which a later fresh pass, after neighbourhood searches, may find still valid).
@@ -180,7 +181,7 @@ fn associate_node(
         let sf = &scene.surfels()[s as usize];
         if sf.usable() {
             let mean = sf.mean.cast::<f64>();
-            let _ = transformed.push((s, mean, terms.rotation * mean + terms.translation));
+            let _ = transformed.push((s, mean, terms.rotation * mean + terms.translation, sf.dir));
         }
     }
     let transformed = &transformed[..];
@@ -283,10 +284,8 @@ fn cache_holds(
         return false;
     }
     let then = &passes[previous.pass as usize];
-    let scene = input.terms.scene;
     let limit = previous.valid_radius as f64;
-    for (s, mean, now) in transformed {
-        let dir = scene.surfels()[*s as usize].dir;
+    for &(_, mean, now, dir) in transformed {
         if then.dirs.of(dir) != input.dirs.of(dir) {
             return false;
         }
@@ -331,7 +330,7 @@ impl Search<'_> {
         }
         // The model mean lies in its cell: skip cells farther than the best match.
         let near =
-            self.transformed.iter().map(|(_, _, p)| cell_distance2(p, key, self.res)).fold(f64::INFINITY, min_of);
+            self.transformed.iter().map(|(_, _, p, _)| cell_distance2(p, key, self.res)).fold(f64::INFINITY, min_of);
         if near >= self.best {
             self.second = min_of(self.second, near);
             return;
@@ -355,8 +354,8 @@ impl Search<'_> {
         if self.input.params.match_contours && mnode.border != self.node.border {
             return;
         }
-        for &(s, _, mu) in self.transformed {
-            let Some(ms) = self.candidate(mnode, s) else {
+        for &(s, _, mu, dir) in self.transformed {
+            let Some(ms) = self.candidate(mnode, dir) else {
                 continue;
             };
             let dist2 = (model.surfels()[ms as usize].mean.cast::<f64>() - mu).norm_squared();
@@ -389,11 +388,11 @@ impl Search<'_> {
     }
 
     /// The model surfel of node `mnode` that scene surfel `s` is compared with: the
-    /// first usable one among the view directions within the angle gate, best first.
+    /// first usable one among the view directions within the angle gate of its view
+    /// direction `dir`, best first.
     #[inline(always)]
-    fn candidate(&self, mnode: &Node, s: u32) -> Option<u32> {
+    fn candidate(&self, mnode: &Node, dir: u8) -> Option<u32> {
         let model = self.input.terms.model;
-        let dir = self.input.terms.scene.surfels()[s as usize].dir;
         self.input
             .dirs
             .of(dir)
@@ -437,8 +436,8 @@ impl Search<'_> {
             if self.input.params.match_contours && mnode.border != self.node.border {
                 continue;
             }
-            for &(s, _, mu) in self.transformed {
-                if let Some(ms) = self.candidate(mnode, s) {
+            for &(s, _, mu, dir) in self.transformed {
+                if let Some(ms) = self.candidate(mnode, dir) {
                     let dist2 = (model.surfels()[ms as usize].mean.cast::<f64>() - mu).norm_squared();
                     if dist2 < second && self.passes_gates(s, ms) {
                         second = dist2;
@@ -523,7 +522,7 @@ impl Search<'_> {
         for (i, axis) in slab.iter_mut().enumerate() {
             for (j, v) in axis.iter_mut().enumerate().take(n[i]) {
                 let cell_lo = (lo[i] + j as i32) as f64 * self.res;
-                for (_, _, p) in self.transformed {
+                for (_, _, p, _) in self.transformed {
                     let d = axis_distance(cell_lo, p[i], self.res);
                     *v = min_of(*v, d * d);
                 }
