@@ -520,12 +520,14 @@ impl Search<'_> {
     fn slabs(&self, lo: [i32; 3], n: [usize; 3]) -> [[f64; 5]; 3] {
         let mut slab = [[f64::INFINITY; 5]; 3];
         for (i, axis) in slab.iter_mut().enumerate() {
-            for (j, v) in axis.iter_mut().enumerate().take(n[i]) {
+            for (j, v) in axis[..n[i].min(5)].iter_mut().enumerate() {
                 let cell_lo = (lo[i] + j as i32) as f64 * self.res;
+                let mut nearest = f64::INFINITY;
                 for (_, _, p, _) in self.transformed {
                     let d = axis_distance(cell_lo, p[i], self.res);
-                    *v = min_of(*v, d * d);
+                    nearest = min_of(nearest, d * d);
                 }
+                *v = nearest;
             }
         }
         slab
