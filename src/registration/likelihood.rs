@@ -133,8 +133,8 @@ fn best_match(
             continue;
         }
         let slots = &b.nodes()[m as usize].surfels;
-        for &k in dirs {
-            let sb = slots[k as usize];
+        for &dir in dirs {
+            let sb = slots[dir as usize];
             if sb == NONE {
                 continue;
             }
