@@ -387,9 +387,9 @@ impl Search<'_> {
         }
     }
 
-    /// The model surfel of node `mnode` that scene surfel `s` is compared with: the
-    /// first usable one among the view directions within the angle gate of its view
-    /// direction `dir`, best first.
+    /// The model surfel of node `mnode` that a scene surfel of view direction `dir`
+    /// is compared with: the first usable one among the view directions within the
+    /// angle gate of `dir`, best first.
     #[inline(always)]
     fn candidate(&self, mnode: &Node, dir: u8) -> Option<u32> {
         let model = self.input.terms.model;
