@@ -174,9 +174,9 @@ pub(crate) struct AggregationInput<'a> {
     pub cols: std::ops::Range<usize>,
     /// Tracking: only the points this gate keeps enter (paper §5.2).
     pub gate: Option<&'a PixelGate>,
-    /// With a gate: the camera-frame depths outside which it keeps no point
-    /// (`PixelGate::camera_depth_range`).
-    pub gate_depth_m: (f32, f32),
+    /// With a gate: the raw depths (first, last) within the camera-frame depths outside
+    /// which it keeps no point (`PixelGate::camera_depth_range`, `raw_depth_interval`).
+    pub gate_depth_raw: (u16, u16),
     /// With a gate: per row, the columns whose rays can meet it (the others are skipped).
     pub spans: Option<&'a RowSpans>,
 }
@@ -302,7 +302,12 @@ impl Band {
                 .zip(&input.flags[start..end])
                 .zip(frame.rgb[3 * start..3 * end].chunks_exact(3));
             for (u, (((&d, ray), &flags), rgb)) in span.clone().zip(pixels) {
-                let cell = if d == 0 {
+                // Beyond the gate's depths (mostly the background behind the object, seen
+                // through the gate's image) a pixel is dropped before any other work; the
+                // first of those depths is at least 1 (0: no measurement).
+                let dropped =
+                    if GATED { !(d >= input.gate_depth_raw.0 && d <= input.gate_depth_raw.1) } else { d == 0 };
+                let cell = if dropped {
                     (NO_CELL, NONE)
                 } else {
                     self.pixel::<GATED, PLACED, SMOOTH>(input, Pixel { depth: d, ray, flags, rgb }, u, first_row, scale)
@@ -370,11 +375,6 @@ impl Band {
     ) -> (u64, u32) {
         let Pixel { depth: d, ray, flags, rgb } = px;
         let z = d as f32 * scale;
-        // Beyond the gate's depths (mostly the background behind the object, seen
-        // through the gate's image) a point is dropped before any other work.
-        if GATED && !(z >= input.gate_depth_m.0 && z <= input.gate_depth_m.1) {
-            return (NO_CELL, NONE);
-        }
         let r2 = z * z * ray.range2_factor;
         let level = level_of(r2, &input.level_thresholds_r2);
         if level >= input.num_levels {

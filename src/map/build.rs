@@ -5,7 +5,7 @@ use super::aggregate::{AggregationInput, BAND_ROWS, Band, Placement};
 use super::assemble::Assembly;
 use super::border::{BorderScratch, mark_borders};
 use super::params::{MAX_LEVELS, MapParams};
-use super::region::ImageRegion;
+use super::region::{ImageRegion, raw_depth_interval};
 use crate::frame::{FrameError, RayTable, RgbdFrame};
 use crate::geometry::{CameraError, Pose};
 use nalgebra::Vector3;
@@ -205,7 +205,9 @@ impl MapBuilder {
             placement,
             cols: point_cols,
             gate: region.gate.as_ref(),
-            gate_depth_m: region.gate.as_ref().map_or((f32::NEG_INFINITY, f32::INFINITY), |g| g.camera_depth_range()),
+            gate_depth_raw: region.gate.as_ref().map_or((1, u16::MAX), |g| {
+                raw_depth_interval(g.camera_depth_range(), frame.camera.depth_scale_m as f32)
+            }),
             spans: region.spans.as_ref(),
         };
         self.bands[..self.active_bands].par_iter_mut().for_each(|b| b.aggregate(&input));

@@ -205,6 +205,38 @@ impl PixelGate {
     }
 }
 
+/// The raw depths `d` in `1..=65535` whose metric depth `d as f32 · scale` lies in
+/// `range_m` (both ends included), as `(first, last)`; `first > last` when there is none.
+/// The product is monotone in `d` whatever the scale, so these depths are one run, found
+/// by bisection. The aggregation tests a pixel's raw depth against it instead of
+/// converting every depth first: the same pixels pass.
+pub(crate) fn raw_depth_interval(range_m: (f32, f32), scale: f32) -> (u16, u16) {
+    const NONE_KEPT: (u16, u16) = (1, 0);
+    let (near, far) = range_m;
+    if scale.is_nan() || near.is_nan() || far.is_nan() {
+        return NONE_KEPT;
+    }
+    let metric = |d: usize| d as f32 * scale;
+    // Before the run the depth is beyond one end of the range, after it beyond the
+    // other (which one depends on the sign of the scale).
+    let rising = scale >= 0.0;
+    let before = |d: usize| if rising { metric(d) < near } else { metric(d) > far };
+    let after = |d: usize| if rising { metric(d) > far } else { metric(d) < near };
+    let first = first_where(1, 65_536, |d| !before(d));
+    let end = first_where(first, 65_536, after);
+    if first >= end { NONE_KEPT } else { (first as u16, (end - 1) as u16) }
+}
+
+/// The first `d` in `lo..hi` where `pred` holds (`hi` if none), for a `pred` that holds
+/// on a suffix of the range.
+fn first_where(mut lo: usize, mut hi: usize, pred: impl Fn(usize) -> bool) -> usize {
+    while lo < hi {
+        let mid = lo + (hi - lo) / 2;
+        if pred(mid) { hi = mid } else { lo = mid + 1 }
+    }
+    lo
+}
+
 /// The gate's ellipsoid as the rays of a pinhole camera meet it: the ray `r` meets
 /// `(x − c)ᵀ A (x − c) ≤ 1` (camera frame) where `(rᵀAc)² ≥ rᵀAr · (cᵀAc − 1)`.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -518,5 +550,36 @@ mod tests {
             spans: None,
         };
         assert_eq!(r.clipped(640, 480), ((10..100, 20..200), (30..60, 40..200)));
+    }
+
+    #[test]
+    fn the_raw_depth_interval_keeps_the_pixels_the_metric_test_keeps() {
+        let inf = f32::INFINITY;
+        let scales = [1.0 / 5000.0, 1e-3, 0.0, -0.0, -1e-3, inf, -inf, f32::NAN, 1e-30];
+        let ranges = [
+            (0.5, 1.5),
+            (1.0, 1.0),
+            (2.0, 1.0),
+            (-inf, inf),
+            (-1.0, 0.0),
+            (0.0, 0.0),
+            (13.0, 14.0),
+            (65.535, 70.0),
+            (f32::NAN, 1.0),
+            (0.5, f32::NAN),
+            (0.7999, 0.80001),
+            (inf, inf),
+            (-inf, -inf),
+        ];
+        for scale in scales {
+            for range in ranges {
+                let (first, last) = raw_depth_interval(range, scale);
+                for d in 1..=u16::MAX {
+                    let z = d as f32 * scale;
+                    let metric = z >= range.0 && z <= range.1;
+                    assert_eq!((first..=last).contains(&d), metric, "d {d}, scale {scale}, range {range:?}");
+                }
+            }
+        }
     }
 }
