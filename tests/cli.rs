@@ -108,6 +108,20 @@ fn errors_exit_non_zero_and_name_the_problem() {
     let out = mrsmap(&["eval", "rpe", path_str(&gt), path_str(&gt), "--delta", "0"]);
     assert_eq!(out.status.code(), Some(2), "{}", String::from_utf8_lossy(&out.stderr));
     assert!(String::from_utf8_lossy(&out.stderr).contains("--delta"));
+    // A missing recording is named as such (it used to be taken for the output file,
+    // which did not exist either).
+    let dir = temp_dir("cli-replay-missing");
+    let config = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("robot_config/tracker.toml");
+    let poses = dir.join("poses.mcap");
+    let out =
+        mrsmap(&["replay", "--input", "/no/such/rec.mcap", "--config", path_str(&config), "--out", path_str(&poses)]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("cannot open /no/such/rec.mcap") && !err.contains("is the input recording"), "{err}");
+    // A folder is not read as a file that lacks MCAP's magic bytes.
+    let out = mrsmap(&["replay", "--input", path_str(&dir), "--config", path_str(&config), "--out", path_str(&poses)]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains(&format!("cannot open {}", dir.display())) && !err.contains("magic"), "{err}");
 }
 
 #[test]

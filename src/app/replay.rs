@@ -78,7 +78,11 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
         if out.exists() && !job.force {
             bail!("{} exists; pass --force to replace it", out.display());
         }
-        if out.canonicalize().ok() == job.input.canonicalize().ok() {
+        // (Only paths that both exist can be the same file; a missing input is reported
+        // by the reader, naming it.)
+        if let (Ok(out), Ok(input)) = (out.canonicalize(), job.input.canonicalize())
+            && out == input
+        {
             bail!("--out {} is the input recording", out.display());
         }
     }

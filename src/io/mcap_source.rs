@@ -245,8 +245,11 @@ impl McapSource {
     pub fn open(path: &Path, topics: &[&str]) -> Result<Self, McapError> {
         let mut file = File::open(path)?;
         let mut magic = [0u8; 8];
-        if file.read_exact(&mut magic).is_err() || magic != *mcap::MAGIC {
-            return Err(McapError::BadMagic);
+        match file.read_exact(&mut magic) {
+            Ok(()) if magic == *mcap::MAGIC => {}
+            // Not a file that can be read (a folder, a device error): said as such.
+            Err(e) if e.kind() != std::io::ErrorKind::UnexpectedEof => return Err(e.into()),
+            _ => return Err(McapError::BadMagic),
         }
         let file_len = file.metadata()?.len();
         // A missing or damaged summary is not an error: the file is streamed instead.

@@ -44,7 +44,15 @@ impl Default for RecordingTopics {
 /// Why a recording could not be read.
 #[derive(Debug, Error)]
 pub enum RecordingError {
-    /// The file cannot be opened or is not MCAP.
+    /// The file cannot be opened (missing, no permission, ...).
+    #[error("cannot open {path}: {source}")]
+    Unreadable {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The file is not MCAP, or its start cannot be read as such.
     #[error("{path}: cannot read as MCAP: {source}")]
     Open {
         /// The file.
@@ -169,8 +177,10 @@ impl RecordingReader {
     /// Opens a recording. With `camera`, its intrinsics replace the calibration topic.
     pub fn open(path: &Path, topics: RecordingTopics, camera: Option<CameraModel>) -> Result<Self, RecordingError> {
         let names = [topics.color.as_str(), topics.depth.as_str(), topics.camera_info.as_str()];
-        let source = McapSource::open(path, &names)
-            .map_err(|source| RecordingError::Open { path: path.to_path_buf(), source })?;
+        let source = McapSource::open(path, &names).map_err(|source| match source {
+            mcap::McapError::Io(source) => RecordingError::Unreadable { path: path.to_path_buf(), source },
+            source => RecordingError::Open { path: path.to_path_buf(), source },
+        })?;
         Ok(RecordingReader {
             source,
             topics,
