@@ -118,6 +118,10 @@ fn errors_exit_non_zero_and_name_the_problem() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert!(err.contains("cannot open /no/such/rec.mcap") && !err.contains("is the input recording"), "{err}");
+    // A missing dataset is said as such (before its camera is guessed from its name).
+    let out = mrsmap(&["convert", "tum-to-mcap", "/no/such/dataset", "--out", path_str(&dir.join("c.mcap"))]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("opening dataset /no/such/dataset") && !err.contains("cannot tell the camera"), "{err}");
     // A folder is not read as a file that lacks MCAP's magic bytes.
     let out = mrsmap(&["replay", "--input", path_str(&dir), "--config", path_str(&config), "--out", path_str(&poses)]);
     let err = String::from_utf8_lossy(&out.stderr);

@@ -69,6 +69,9 @@ pub fn run(job: &ConvertJob) -> Result<ConvertSummary> {
     if job.out.exists() && !job.force {
         bail!("{} exists; pass --force to replace it", job.out.display());
     }
+    // The dataset first: a missing folder is said as such, not as an unknown camera.
+    let dataset =
+        TumDataset::open(&job.dataset).with_context(|| format!("opening dataset {}", job.dataset.display()))?;
     let camera = match &job.camera {
         Some(path) => read_camera(path)?,
         None => tum_camera_for(&job.dataset).with_context(|| {
@@ -78,8 +81,6 @@ pub fn run(job: &ConvertJob) -> Result<ConvertSummary> {
             )
         })?,
     };
-    let dataset =
-        TumDataset::open(&job.dataset).with_context(|| format!("opening dataset {}", job.dataset.display()))?;
     let frames: Vec<_> =
         dataset.frames.iter().skip(job.first_frame).take(job.max_frames.unwrap_or(usize::MAX)).collect();
     if frames.is_empty() {
