@@ -122,6 +122,61 @@ fn errors_exit_non_zero_and_name_the_problem() {
     let out = mrsmap(&["convert", "tum-to-mcap", "/no/such/dataset", "--out", path_str(&dir.join("c.mcap"))]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("opening dataset /no/such/dataset") && !err.contains("cannot tell the camera"), "{err}");
+    // Outputs that cannot be written are refused before the run, not after it (a
+    // model built over minutes would be lost at the end).
+    let clip = teddy_clip();
+    let camera = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("robot_config/cameras/tum_fr3.toml");
+    let object = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("robot_config/objects/teddy.toml");
+    let (clip, camera, object) = (path_str(&clip), path_str(&camera), path_str(&object));
+    let lost = "/no/such/folder/out.txt";
+    for (args, flag) in [
+        (vec!["map", "--dataset", clip, "--camera", camera, "--object", object, "--out", lost], "--out"),
+        (vec!["map", "--dataset", clip, "--camera", camera, "--trajectory", lost], "--trajectory"),
+        (
+            vec![
+                "odometry",
+                "--dataset",
+                clip,
+                "--camera",
+                camera,
+                "--out",
+                path_str(&dir.join("o.txt")),
+                "--timings",
+                lost,
+            ],
+            "--timings",
+        ),
+        (
+            vec![
+                "track",
+                "--config",
+                path_str(&config),
+                "--dataset",
+                clip,
+                "--camera",
+                camera,
+                "--trajectory",
+                path_str(&dir),
+            ],
+            "--trajectory",
+        ),
+        (
+            vec!["replay", "--input", "/no/such/rec.mcap", "--config", path_str(&config), "--trajectory", lost],
+            "--trajectory",
+        ),
+        (vec!["poses", "--out", lost], "--out"),
+    ] {
+        let out = mrsmap(&args);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {err}");
+        assert!(err.starts_with(&format!("error: {flag} ")) && err.contains("cannot write there"), "{args:?}: {err}");
+        assert!(!err.contains("frames (Ctrl-C"), "{args:?} ran before refusing: {err}");
+    }
+    // A picture that cannot be written is said to be so (it was "cannot read").
+    let model = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("models/teddy.mrsm");
+    let out = mrsmap(&["model", "render", path_str(&model), "--out", "/no/such/folder/teddy.png"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("cannot write /no/such/folder/teddy.png") && !err.contains("cannot read"), "{err}");
     // A folder is not read as a file that lacks MCAP's magic bytes.
     let out = mrsmap(&["replay", "--input", path_str(&dir), "--config", path_str(&config), "--out", path_str(&poses)]);
     let err = String::from_utf8_lossy(&out.stderr);

@@ -1,4 +1,4 @@
-//! Small helpers for reports: percentiles and progress bars.
+//! Small helpers for reports: percentiles, progress bars, and checks of output paths.
 
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -32,4 +32,38 @@ pub fn progress_bar(len: u64, what: &str) -> ProgressBar {
 pub fn log_line(args: std::fmt::Arguments) {
     use std::io::Write as _;
     let _ = writeln!(std::io::stderr().lock(), "{args}");
+}
+
+/// Checks, before a long run, that a file can be written at `path` (once the run ends):
+/// `path` is not a folder, its folder exists, and a file can be created there (one is
+/// created and removed). A run's results are then not lost at its end to a mistyped
+/// folder or a missing permission.
+pub fn check_writable(path: &std::path::Path) -> std::io::Result<()> {
+    use std::io::{Error, ErrorKind};
+    if path.is_dir() {
+        return Err(Error::new(ErrorKind::IsADirectory, "is a folder"));
+    }
+    let folder = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => std::path::Path::new("."),
+    };
+    if !folder.is_dir() {
+        return Err(Error::new(ErrorKind::NotFound, format!("folder {} does not exist", folder.display())));
+    }
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let probe = folder.join(format!(".{name}.mrsmap-write-check-{}", std::process::id()));
+    std::fs::File::create(&probe)?;
+    std::fs::remove_file(&probe)
+}
+
+/// [`check_writable`] for each output given on the command line (`flag`, its path).
+pub fn check_outputs<'a>(
+    outputs: impl IntoIterator<Item = (&'static str, Option<&'a std::path::Path>)>,
+) -> anyhow::Result<()> {
+    for (flag, path) in outputs {
+        if let Some(path) = path {
+            check_writable(path).map_err(|e| anyhow::anyhow!("{flag} {}: cannot write there: {e}", path.display()))?;
+        }
+    }
+    Ok(())
 }

@@ -4,6 +4,7 @@ use super::args::*;
 use anyhow::{Context, Result};
 use mrsmap::app;
 use mrsmap::app::interrupt::{INTERRUPTED_EXIT, Interrupted, Stop};
+use mrsmap::app::report::check_outputs;
 use mrsmap::eval::{Associated, ErrorStats, aligned_positions, associate_stamped, ate_translation, rpe_translation};
 use mrsmap::io::tum::Trajectory;
 use std::path::Path;
@@ -52,6 +53,7 @@ pub fn track(a: TrackArgs) -> Result<ExitCode> {
     }
     if let Some(dataset) = a.dataset {
         let camera = a.camera.ok_or_else(|| anyhow::anyhow!("--dataset needs --camera (the dataset's camera file)"))?;
+        check_outputs([("--trajectory", a.trajectory.as_deref())])?;
         let job = app::track_dataset::TrackDatasetJob {
             dataset,
             camera,
@@ -85,6 +87,7 @@ pub fn odometry_params(lambda: f64) -> mrsmap::odometry::OdometryParams {
 
 /// `mrsmap odometry`.
 pub fn odometry(a: OdometryArgs) -> Result<ExitCode> {
+    check_outputs([("--out", Some(a.out.as_path())), ("--timings", a.timings.as_deref())])?;
     let job = app::odometry::OdometryJob {
         dataset: a.dataset,
         camera: a.camera,
@@ -105,6 +108,7 @@ pub fn odometry(a: OdometryArgs) -> Result<ExitCode> {
 pub fn map(a: MapArgs) -> Result<ExitCode> {
     let mut params = mrsmap::slam::SlamParams { seed: a.seed, ..Default::default() };
     params.map.lambda = a.lambda;
+    check_outputs([("--out", a.out.as_deref()), ("--trajectory", a.trajectory.as_deref())])?;
     let job = app::mapper::MapJob {
         dataset: a.dataset,
         camera: a.camera,
@@ -173,6 +177,7 @@ pub fn camera(a: CameraArgs) -> Result<()> {
 
 /// `mrsmap poses`.
 pub fn poses(a: PosesArgs) -> Result<()> {
+    check_outputs([("--out", a.out.as_deref())])?;
     let job = app::poses_client::PosesJob {
         service: a.service,
         out: a.out,
@@ -338,6 +343,7 @@ pub fn demo(a: DemoArgs) -> Result<()> {
 pub fn replay(a: ReplayArgs) -> Result<ExitCode> {
     let config = mrsmap::io::tracker_config::read_tracker_config(&a.config)?;
     let camera = a.camera.as_deref().map(mrsmap::io::camera_file::read_camera).transpose()?;
+    check_outputs([("--out", a.out.as_deref()), ("--trajectory", a.trajectory.as_deref())])?;
     let job = app::replay::ReplayJob {
         input: a.input,
         out: a.out,

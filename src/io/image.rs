@@ -15,6 +15,14 @@ pub enum ImageError {
         /// The cause.
         source: std::io::Error,
     },
+    /// The file could not be written.
+    #[error("cannot write {path}: {message}")]
+    Write {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        message: String,
+    },
     /// The file is not a valid PNG.
     #[error("{path} is not a valid PNG: {message}")]
     Decode {
@@ -136,11 +144,12 @@ fn write_png(
     depth: png::BitDepth,
     bytes: &[u8],
 ) -> Result<(), ImageError> {
-    let file = std::fs::File::create(path).map_err(|source| ImageError::Io { path: path.to_path_buf(), source })?;
+    let write_err = |message: String| ImageError::Write { path: path.to_path_buf(), message };
+    let file = std::fs::File::create(path).map_err(|e| write_err(e.to_string()))?;
     let mut encoder = png::Encoder::new(std::io::BufWriter::new(file), width, height);
     encoder.set_color(color);
     encoder.set_depth(depth);
-    let enc_err = |e: png::EncodingError| ImageError::Decode { path: path.to_path_buf(), message: e.to_string() };
+    let enc_err = |e: png::EncodingError| write_err(e.to_string());
     let mut writer = encoder.write_header().map_err(enc_err)?;
     writer.write_image_data(bytes).map_err(enc_err)?;
     writer.finish().map_err(enc_err)
