@@ -73,6 +73,7 @@ pub fn track(a: TrackArgs) -> Result<ExitCode> {
         max_frames: a.max_frames,
         idle_timeout: seconds(a.idle_timeout, "--idle-timeout")?,
     };
+    check_outputs([("--record", a.record.as_deref())])?;
     let record = a.record.map(|path| app::recorder::RecordOptions { path, last_seconds: a.record_last });
     let summary = app::tracker_process::run(&config, &limits, record.as_ref())?;
     app::tracker_process::print_summary(&config, &summary);
@@ -368,6 +369,7 @@ pub fn replay(a: ReplayArgs) -> Result<ExitCode> {
 pub fn convert(c: ConvertCommand) -> Result<ExitCode> {
     match c {
         ConvertCommand::TumToMcap(a) => {
+            check_outputs([("--out", Some(a.out.as_path()))])?;
             let job = app::convert::ConvertJob {
                 dataset: a.dataset,
                 camera: a.camera,
