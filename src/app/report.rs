@@ -50,8 +50,7 @@ pub fn check_writable(path: &std::path::Path) -> std::io::Result<()> {
     if !folder.is_dir() {
         return Err(Error::new(ErrorKind::NotFound, format!("folder {} does not exist", folder.display())));
     }
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    let probe = folder.join(format!(".{name}.mrsmap-write-check-{}", std::process::id()));
+    let probe = folder.join(format!(".mrsmap-write-check-{}", std::process::id()));
     std::fs::File::create(&probe)?;
     std::fs::remove_file(&probe)
 }
