@@ -108,6 +108,10 @@ fn errors_exit_non_zero_and_name_the_problem() {
     let out = mrsmap(&["eval", "rpe", path_str(&gt), path_str(&gt), "--delta", "0"]);
     assert_eq!(out.status.code(), Some(2), "{}", String::from_utf8_lossy(&out.stderr));
     assert!(String::from_utf8_lossy(&out.stderr).contains("--delta"));
+}
+
+#[test]
+fn bad_paths_and_settings_are_refused_before_any_work() {
     // A missing recording is named as such (it used to be taken for the output file,
     // which did not exist either).
     let dir = temp_dir("cli-replay-missing");
@@ -171,6 +175,21 @@ fn errors_exit_non_zero_and_name_the_problem() {
         assert_eq!(out.status.code(), Some(1), "{args:?}: {err}");
         assert!(err.starts_with(&format!("error: {flag} ")) && err.contains("cannot write there"), "{args:?}: {err}");
         assert!(!err.contains("frames (Ctrl-C"), "{args:?} ran before refusing: {err}");
+    }
+    // The quality measurement refuses settings that would make its table meaningless
+    // (no registrations: precision and recall of 1 by convention) or that its run
+    // cannot have.
+    let quality = ["eval", "tracking-quality", "--config", path_str(&config), "--dataset", clip, "--camera", camera];
+    for (extra, says) in [
+        (vec!["--first-frame", "0", "--trials", "0"], "--trials must be at least 1"),
+        (vec!["--first-frame", "0", "--fail-mm", "nan"], "--fail-mm must be a finite number"),
+        (vec!["--max-shift=-0.1"], "--max-shift must be a finite number"),
+        (vec!["--first-frame", "6"], "needs at least 3 frames"),
+    ] {
+        let args: Vec<&str> = quality.iter().copied().chain(extra.iter().copied()).collect();
+        let out = mrsmap(&args);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.code() == Some(1) && err.contains(says), "{extra:?}: {err}");
     }
     // A picture that cannot be written is said to be so (it was "cannot read").
     let model = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("models/teddy.mrsm");

@@ -66,7 +66,13 @@ pub fn run(config: &TrackerConfig, job: &QualityJob) -> Result<Vec<Trial>> {
     let gt = dataset.groundtruth.as_ref().context("the quality measurement needs groundtruth.txt")?;
     let frames: Vec<_> = dataset.frames.iter().skip(job.first_frame).take(job.frames).cloned().collect();
     if frames.len() < 3 {
-        bail!("too few frames after --first-frame {}", job.first_frame);
+        bail!(
+            "the measurement needs at least 3 frames; {} has {} after --first-frame {} (--frames {})",
+            job.dataset.display(),
+            dataset.frames.len().saturating_sub(job.first_frame),
+            job.first_frame,
+            job.frames
+        );
     }
     let mut loader = FrameLoader::new(camera, false);
     let cam = loader.camera();

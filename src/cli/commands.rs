@@ -195,6 +195,19 @@ pub fn poses(a: PosesArgs) -> Result<()> {
 pub fn eval(command: EvalCommand) -> Result<()> {
     match command {
         EvalCommand::TrackingQuality(a) => {
+            if a.trials == 0 {
+                anyhow::bail!("--trials must be at least 1 (registrations per frame)");
+            }
+            for (flag, value) in [
+                ("--max-shift", a.max_shift),
+                ("--max-turn", a.max_turn),
+                ("--fail-mm", a.fail_mm),
+                ("--fail-deg", a.fail_deg),
+            ] {
+                if !(value.is_finite() && value >= 0.0) {
+                    anyhow::bail!("{flag} must be a finite number >= 0, not {value}");
+                }
+            }
             let config = mrsmap::io::tracker_config::read_tracker_config(&a.config)?;
             let job = app::quality_eval::QualityJob {
                 dataset: a.dataset,
