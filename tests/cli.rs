@@ -191,6 +191,12 @@ fn bad_paths_and_settings_are_refused_before_any_work() {
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(out.status.code() == Some(1) && err.contains(says), "{extra:?}: {err}");
     }
+    // The benchmark reads its tracker configuration before its odometry runs.
+    let out = mrsmap(&["bench", "--dataset", clip, "--camera", camera, "--tracking-config", "/no/such/tracker.toml"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("/no/such/tracker.toml") && !String::from_utf8_lossy(&out.stdout).contains("| VGA"), "{err}");
+    let out = mrsmap(&["bench", "--dataset", clip, "--camera", camera, "--passes", "0"]);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--passes must be at least 1"));
     // A picture that cannot be written is said to be so (it was "cannot read").
     let model = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("models/teddy.mrsm");
     let out = mrsmap(&["model", "render", path_str(&model), "--out", "/no/such/folder/teddy.png"]);

@@ -290,13 +290,15 @@ pub fn bench(a: BenchArgs) -> Result<()> {
         "--frame-gap-ms must be between 0 and 10000 ms, not {}",
         a.frame_gap_ms
     );
+    anyhow::ensure!(a.passes >= 1, "--passes must be at least 1");
+    // Read before the odometry runs, so that a bad file is said at once.
+    let tracking = a.tracking_config.as_deref().map(mrsmap::io::tracker_config::read_tracker_config).transpose()?;
     let threads = a.threads.unwrap_or_else(rayon::current_num_threads);
     let before = app::capacity::probe(threads);
     println!("compiled for: {}\n", app::bench::instruction_set());
     let results = app::bench::run(&job)?;
     app::bench::print(&results, threads);
-    if let Some(path) = &a.tracking_config {
-        let config = mrsmap::io::tracker_config::read_tracker_config(path)?;
+    if let Some(config) = &tracking {
         let gap = std::time::Duration::from_secs_f64(a.frame_gap_ms * 1e-3);
         let gap_note =
             if gap.is_zero() { String::new() } else { format!(", {} ms idle before each frame", a.frame_gap_ms) };
@@ -307,7 +309,7 @@ pub fn bench(a: BenchArgs) -> Result<()> {
         println!("|---|---|---|---|---|---|");
         for &res in &job.resolutions {
             let half = res == app::bench::Resolution::Qvga;
-            let t = app::bench::tracking_ms(&config, &job, a.tracking_first_frame, half, gap)?;
+            let t = app::bench::tracking_ms(config, &job, a.tracking_first_frame, half, gap)?;
             let (ms, median) = (&t.steady_ms, |v: &[f64]| app::report::percentile(v, 0.5));
             println!(
                 "| {} | {threads} | {} | {:.2} / {:.2} | {:.2} / {:.2} | {:.2} |",
