@@ -115,7 +115,7 @@ fn bad_paths_and_settings_are_refused_before_any_work() {
     // A missing recording is named as such (it used to be taken for the output file,
     // which did not exist either).
     let dir = temp_dir("cli-replay-missing");
-    let config = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("robot_config/tracker.toml");
+    let config = root().join("robot_config/tracker.toml");
     let poses = dir.join("poses.mcap");
     let out =
         mrsmap(&["replay", "--input", "/no/such/rec.mcap", "--config", path_str(&config), "--out", path_str(&poses)]);
@@ -129,8 +129,8 @@ fn bad_paths_and_settings_are_refused_before_any_work() {
     // Outputs that cannot be written are refused before the run, not after it (a
     // model built over minutes would be lost at the end).
     let clip = teddy_clip();
-    let camera = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("robot_config/cameras/tum_fr3.toml");
-    let object = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("robot_config/objects/teddy.toml");
+    let camera = fr3_camera_file();
+    let object = root().join("robot_config/objects/teddy.toml");
     let (clip, camera, object) = (path_str(&clip), path_str(&camera), path_str(&object));
     let lost = "/no/such/folder/out.txt";
     for (args, flag) in [
@@ -198,7 +198,7 @@ fn bad_paths_and_settings_are_refused_before_any_work() {
     let out = mrsmap(&["bench", "--dataset", clip, "--camera", camera, "--passes", "0"]);
     assert!(String::from_utf8_lossy(&out.stderr).contains("--passes must be at least 1"));
     // A picture that cannot be written is said to be so (it was "cannot read").
-    let model = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("models/teddy.mrsm");
+    let model = root().join("models/teddy.mrsm");
     let out = mrsmap(&["model", "render", path_str(&model), "--out", "/no/such/folder/teddy.png"]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("cannot write /no/such/folder/teddy.png") && !err.contains("cannot read"), "{err}");
