@@ -181,7 +181,6 @@ fn bad_paths_and_settings_are_refused_before_any_work() {
     // cannot have.
     let quality = ["eval", "tracking-quality", "--config", path_str(&config), "--dataset", clip, "--camera", camera];
     for (extra, says) in [
-        (vec!["--first-frame", "0", "--trials", "0"], "--trials must be at least 1"),
         (vec!["--first-frame", "0", "--fail-mm", "nan"], "--fail-mm must be a finite number"),
         (vec!["--max-shift=-0.1"], "--max-shift must be a finite number"),
         (vec!["--first-frame", "6"], "needs at least 3 frames"),
@@ -195,8 +194,6 @@ fn bad_paths_and_settings_are_refused_before_any_work() {
     let out = mrsmap(&["bench", "--dataset", clip, "--camera", camera, "--tracking-config", "/no/such/tracker.toml"]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("/no/such/tracker.toml") && !String::from_utf8_lossy(&out.stdout).contains("| VGA"), "{err}");
-    let out = mrsmap(&["bench", "--dataset", clip, "--camera", camera, "--passes", "0"]);
-    assert!(String::from_utf8_lossy(&out.stderr).contains("--passes must be at least 1"));
     // A picture that cannot be written is said to be so (it was "cannot read").
     let model = root().join("models/teddy.mrsm");
     let out = mrsmap(&["model", "render", path_str(&model), "--out", "/no/such/folder/teddy.png"]);
@@ -206,6 +203,39 @@ fn bad_paths_and_settings_are_refused_before_any_work() {
     let out = mrsmap(&["replay", "--input", path_str(&dir), "--config", path_str(&config), "--out", path_str(&poses)]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains(&format!("cannot open {}", dir.display())) && !err.contains("magic"), "{err}");
+}
+
+#[test]
+fn zero_counts_and_empty_service_names_are_refused() {
+    // `--max-frames 0` used to run nothing and report it (replay: "0 tracked"; the live
+    // tracker: waiting for frames it would not track); an empty service prefix put the
+    // driver on a bare "/rgbd/vga".
+    let config = root().join("robot_config/tracker.toml");
+    let config = path_str(&config);
+    for (args, flag, says) in [
+        (vec!["replay", "--input", "r.mcap", "--config", config, "--max-frames", "0"], "--max-frames", "at least 1"),
+        (vec!["track", "--config", config, "--max-frames", "0"], "--max-frames", "at least 1"),
+        (vec!["camera", "--dataset", "d", "--camera", "c", "--max-frames", "0"], "--max-frames", "at least 1"),
+        (
+            vec!["odometry", "--dataset", "d", "--camera", "c", "--out", "o", "--max-frames", "0"],
+            "--max-frames",
+            "at least 1",
+        ),
+        (vec!["poses", "--count", "0"], "--count", "at least 1"),
+        (vec!["bench", "--dataset", "d", "--camera", "c", "--passes", "0"], "--passes", "at least 1"),
+        (
+            vec!["eval", "tracking-quality", "--config", config, "--dataset", "d", "--camera", "c", "--trials", "0"],
+            "--trials",
+            "at least 1",
+        ),
+        (vec!["camera", "--dataset", "d", "--camera", "c", "--service", ""], "--service", "must not be empty"),
+        (vec!["track", "--config", config, "--poses-service", " "], "--poses-service", "must not be empty"),
+    ] {
+        let out = mrsmap(&args);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains(&format!("for '{flag} ")) && err.contains(says), "{args:?}: {err}");
+    }
 }
 
 #[test]

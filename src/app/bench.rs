@@ -326,7 +326,7 @@ pub fn tracking_ms(
         s.spawn(timed).join().map_err(|_| anyhow::anyhow!("the tracking benchmark's thread failed"))
     })??;
     if ms.is_empty() {
-        bail!("no tracking frames timed (--passes 0?)");
+        bail!("no tracking frames were timed");
     }
     let (first_scene, first_register) = ms.remove(0);
     Ok(TrackingTimes {

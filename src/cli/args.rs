@@ -24,7 +24,7 @@ pub struct OdometryArgs {
     #[arg(long)]
     pub threads: Option<usize>,
     /// Process at most this many frames.
-    #[arg(long)]
+    #[arg(long, value_parser = at_least_one::<usize>)]
     pub max_frames: Option<usize>,
     /// Halve images and intrinsics on load (QVGA from VGA data).
     #[arg(long)]
@@ -62,7 +62,7 @@ pub struct MapArgs {
     #[arg(long)]
     pub threads: Option<usize>,
     /// Use at most this many frames, from the first.
-    #[arg(long)]
+    #[arg(long, value_parser = at_least_one::<usize>)]
     pub max_frames: Option<usize>,
     /// Seed of the randomised loop-closure draws.
     #[arg(long, default_value_t = 1)]
@@ -89,7 +89,7 @@ pub struct CameraArgs {
     #[command(flatten)]
     pub topics: TopicArgs,
     /// Service prefix; the tracker's config names the same (camera.service).
-    #[arg(long, default_value = "mrsmap/camera0")]
+    #[arg(long, default_value = "mrsmap/camera0", value_parser = service_name)]
     pub service: String,
     /// Frames per second (0: as fast as possible).
     #[arg(long, default_value_t = 30.0)]
@@ -104,7 +104,7 @@ pub struct CameraArgs {
     #[arg(long, default_value_t = 0)]
     pub first_frame: usize,
     /// Stop after this many frames.
-    #[arg(long)]
+    #[arg(long, value_parser = at_least_one::<u64>)]
     pub max_frames: Option<u64>,
 }
 
@@ -114,13 +114,13 @@ pub struct TrackArgs {
     #[arg(long)]
     pub config: PathBuf,
     /// Stop after this many frames (live mode).
-    #[arg(long)]
+    #[arg(long, value_parser = at_least_one::<u64>)]
     pub max_frames: Option<u64>,
     /// Override the config's camera.service.
-    #[arg(long)]
+    #[arg(long, value_parser = service_name)]
     pub camera_service: Option<String>,
     /// Override the config's poses.service.
-    #[arg(long)]
+    #[arg(long, value_parser = service_name)]
     pub poses_service: Option<String>,
     /// Stop after this many seconds without a frame (live mode).
     #[arg(long)]
@@ -162,13 +162,13 @@ pub struct TrackArgs {
 #[derive(Args)]
 pub struct PosesArgs {
     /// The pose service (the tracker config's poses.service).
-    #[arg(long, default_value = mrsmap::io::ipc::POSES_SERVICE)]
+    #[arg(long, default_value = mrsmap::io::ipc::POSES_SERVICE, value_parser = service_name)]
     pub service: String,
     /// Write each object's object_from_camera as a TUM trajectory (tracked frames).
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Stop after this many pose messages.
-    #[arg(long)]
+    #[arg(long, value_parser = at_least_one::<u64>)]
     pub count: Option<u64>,
     /// Stop after this many seconds without a pose.
     #[arg(long)]
@@ -223,7 +223,7 @@ pub enum EvalCommand {
         /// Estimated trajectory.
         est: PathBuf,
         /// Frame delta (1: consecutive frames, the TUM benchmark's setting).
-        #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
+        #[arg(long, default_value_t = 1, value_parser = at_least_one::<u64>)]
         delta: u64,
         #[command(flatten)]
         association: AssociationArgs,
@@ -274,7 +274,7 @@ pub struct BenchArgs {
     #[arg(long, default_value_t = 200)]
     pub frames: usize,
     /// Passes over the frames.
-    #[arg(long, default_value_t = 3)]
+    #[arg(long, default_value_t = 3, value_parser = at_least_one::<usize>)]
     pub passes: usize,
     /// Worker threads [default: all cores].
     #[arg(long)]
@@ -341,7 +341,7 @@ pub struct QualityArgs {
     #[arg(long, default_value_t = 100)]
     pub frames: usize,
     /// Perturbed registrations per frame.
-    #[arg(long, default_value_t = 6)]
+    #[arg(long, default_value_t = 6, value_parser = at_least_one::<usize>)]
     pub trials: usize,
     /// Largest prior shift per axis (m).
     #[arg(long, default_value_t = 0.06)]
@@ -417,7 +417,7 @@ pub struct ReplayArgs {
     #[arg(long)]
     pub qvga: bool,
     /// Stop after this many tracked frames.
-    #[arg(long)]
+    #[arg(long, value_parser = at_least_one::<usize>)]
     pub max_frames: Option<usize>,
 }
 
@@ -459,6 +459,25 @@ pub struct TumToMcapArgs {
     #[arg(long, default_value_t = 0)]
     pub first_frame: usize,
     /// Convert at most this many frames.
-    #[arg(long)]
+    #[arg(long, value_parser = at_least_one::<usize>)]
     pub max_frames: Option<usize>,
+}
+
+/// A count such as `--max-frames`: zero would run nothing and report nothing, so it is
+/// refused at once.
+fn at_least_one<T>(text: &str) -> Result<T, String>
+where
+    T: std::str::FromStr<Err = std::num::ParseIntError> + From<u8> + PartialEq,
+{
+    match text.parse::<T>() {
+        Ok(n) if n == T::from(0) => Err("must be at least 1".into()),
+        Ok(n) => Ok(n),
+        Err(e) => Err(e.to_string()),
+    }
+}
+
+/// An iceoryx2 service name (prefix): not empty, or the driver and the tracker would
+/// meet on a bare `/rgbd/vga`.
+fn service_name(text: &str) -> Result<String, String> {
+    if text.trim().is_empty() { Err("a service name must not be empty".into()) } else { Ok(text.to_owned()) }
 }

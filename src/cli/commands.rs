@@ -195,9 +195,6 @@ pub fn poses(a: PosesArgs) -> Result<()> {
 pub fn eval(command: EvalCommand) -> Result<()> {
     match command {
         EvalCommand::TrackingQuality(a) => {
-            if a.trials == 0 {
-                anyhow::bail!("--trials must be at least 1 (registrations per frame)");
-            }
             for (flag, value) in [
                 ("--max-shift", a.max_shift),
                 ("--max-turn", a.max_turn),
@@ -290,7 +287,6 @@ pub fn bench(a: BenchArgs) -> Result<()> {
         "--frame-gap-ms must be between 0 and 10000 ms, not {}",
         a.frame_gap_ms
     );
-    anyhow::ensure!(a.passes >= 1, "--passes must be at least 1");
     // Read before the odometry runs, so that a bad file is said at once.
     let tracking = a.tracking_config.as_deref().map(mrsmap::io::tracker_config::read_tracker_config).transpose()?;
     let threads = a.threads.unwrap_or_else(rayon::current_num_threads);
