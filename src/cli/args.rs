@@ -21,7 +21,7 @@ pub struct OdometryArgs {
     #[arg(long)]
     pub timings: Option<PathBuf>,
     /// Worker threads [default: all cores]. Results are identical for any count.
-    #[arg(long)]
+    #[arg(long, value_parser = at_least_one::<usize>)]
     pub threads: Option<usize>,
     /// Process at most this many frames.
     #[arg(long, value_parser = at_least_one::<usize>)]
@@ -59,7 +59,7 @@ pub struct MapArgs {
     #[arg(long)]
     pub trajectory: Option<PathBuf>,
     /// Worker threads [default: all cores]. Results are identical for any count.
-    #[arg(long)]
+    #[arg(long, value_parser = at_least_one::<usize>)]
     pub threads: Option<usize>,
     /// Use at most this many frames, from the first.
     #[arg(long, value_parser = at_least_one::<usize>)]
@@ -277,7 +277,7 @@ pub struct BenchArgs {
     #[arg(long, default_value_t = 3, value_parser = at_least_one::<usize>)]
     pub passes: usize,
     /// Worker threads [default: all cores].
-    #[arg(long)]
+    #[arg(long, value_parser = at_least_one::<usize>)]
     pub threads: Option<usize>,
     /// Image sizes to run.
     #[arg(long, value_enum, value_delimiter = ',', default_value = "vga,qvga")]
@@ -411,7 +411,7 @@ pub struct ReplayArgs {
     #[arg(long)]
     pub camera: Option<PathBuf>,
     /// Track only every n-th frame (the default 1 tracks every frame; none is dropped).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, value_parser = at_least_one::<usize>)]
     pub every: usize,
     /// Halve images and intrinsics (track at QVGA from a VGA recording).
     #[arg(long)]
