@@ -88,7 +88,10 @@ fn driver_tracker_and_client_as_processes() {
     let config = read_tracker_config(&config_path).expect("config");
     let traj = dir.join("poses.txt");
     let (tracker, tracker_err) = start(&["track", "--config", path(&config_path)]);
-    wait_for(&tracker_err, "ready", 60);
+    // The start-up line says where the tracker listens and publishes.
+    let ready = wait_for(&tracker_err, "ready", 60);
+    let ports = format!("frames from {}/rgbd/vga, poses on {}", config.camera_service, config.poses_service);
+    assert!(ready.last().is_some_and(|l| l.contains(&ports) && l.contains("'teddy'")), "{ready:?}");
     let (client, client_err) =
         start(&["poses", "--service", &config.poses_service, "--out", path(&traj), "--count", "8", "--timeout", "30"]);
     wait_for(&client_err, "reading", 30);

@@ -79,6 +79,10 @@ pub struct LiveTracker<F: WireFrame> {
     node: Node<Ipc>,
     listener: Listener<Ipc>,
     core: Core<F>,
+    /// Where frames come from and poses go, for the log.
+    ports: String,
+    /// The frame service, for the log.
+    frames_name: String,
 }
 
 /// The part of the process the loop changes (apart from the listener the WaitSet holds).
@@ -147,7 +151,13 @@ impl<F: WireFrame> LiveTracker<F> {
             last_sequence: None,
             recorder: None,
         };
-        Ok(LiveTracker { node, listener, core })
+        let objects = core.names.iter().map(|n| format!("'{n}'")).collect::<Vec<_>>().join(", ");
+        let ports = format!(
+            "tracking {objects} on {} thread(s); frames from {frames_name}, poses on {}",
+            core.pool.current_num_threads(),
+            config.poses_service
+        );
+        Ok(LiveTracker { node, listener, core, ports, frames_name })
     }
 
     /// The loop: wait for a frame, track, publish; until a signal or a limit.
@@ -162,7 +172,7 @@ impl<F: WireFrame> LiveTracker<F> {
         };
         let mut last_frame = Instant::now();
         let mut waiting_reported = false;
-        log_line(format_args!("tracker: ready; {} object(s), waiting for frames", self.core.names.len()));
+        log_line(format_args!("tracker: ready; {}; waiting for frames", self.ports));
         loop {
             // Blocks until the driver notifies (or 250 ms pass); no polling.
             // A signal interrupts the wait: that is not an error but the stop request.
@@ -180,7 +190,10 @@ impl<F: WireFrame> LiveTracker<F> {
                     break;
                 }
             } else if last_frame.elapsed() > Duration::from_secs(2) && !waiting_reported {
-                log_line(format_args!("tracker: no frame for 2 s (is the camera driver running?); waiting"));
+                log_line(format_args!(
+                    "tracker: no frame on {} for 2 s (is a camera driver publishing there?); waiting",
+                    self.frames_name
+                ));
                 waiting_reported = true;
             }
             if limits.idle_timeout.is_some_and(|t| last_frame.elapsed() > t) {
