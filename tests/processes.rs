@@ -255,6 +255,25 @@ fn missing_or_corrupt_models_stop_the_tracker_at_start_with_a_clear_error() {
 }
 
 #[test]
+fn a_recording_that_cannot_be_written_is_named_at_start() {
+    // The file exists and opens, but every write fails (a full disk): the tracker says
+    // which recording it could not start instead of the MCAP crate's bare I/O error.
+    let dir = temp_dir("record-full");
+    let config_path = write_tracker_config(&dir, "full", "");
+    let partial = dir.join("run.mcap.partial");
+    let _ = std::fs::remove_file(&partial);
+    std::os::unix::fs::symlink("/dev/full", &partial).expect("symlink");
+    let record = dir.join("run.mcap");
+    let out = Command::new(mrsmap_bin())
+        .args(["track", "--config", path(&config_path), "--record", path(&record), "--idle-timeout", "1"])
+        .output()
+        .expect("runs");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains(&format!("starting the recording {}", partial.display())), "{err}");
+}
+
+#[test]
 fn camera_replays_mcap_and_the_tracker_records_what_it_receives() {
     let dir = temp_dir("mcap-live");
     let recording = dir.join("teddy.mcap");

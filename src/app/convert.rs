@@ -8,7 +8,7 @@ use crate::io::camera_file::{parse_camera, read_camera};
 use crate::io::frames::FrameLoader;
 use crate::io::mcap_write::{DepthEncoding, FrameChannels, McapFile};
 use crate::io::recording::RecordingTopics;
-use crate::io::tum::{TumDataset, format_stamp};
+use crate::io::tum::{DatasetFrame, TumDataset, format_stamp};
 use anyhow::{Context, Result, bail};
 use std::path::{Path, PathBuf};
 
@@ -91,8 +91,32 @@ pub fn run(job: &ConvertJob) -> Result<ConvertSummary> {
     let partial = job.out.with_extension("mcap.partial");
     let mut file =
         McapFile::create(&partial, job.compression).with_context(|| format!("creating {}", partial.display()))?;
+    // A write that fails (a full disk) removes the partial file: it is derived from the
+    // dataset, which is still there, and would only hold the space the write lacked.
+    let converted = write_frames(job, &frames, camera, &mut file).and_then(|counts| {
+        file.finish()?;
+        Ok(counts)
+    });
+    let (written, skipped, interrupted) = match converted {
+        Ok(counts) => counts,
+        Err(e) => {
+            let _ = std::fs::remove_file(&partial);
+            return Err(e.context(format!("writing {} (its partial file was removed)", job.out.display())));
+        }
+    };
+    std::fs::rename(&partial, &job.out).with_context(|| format!("renaming to {}", job.out.display()))?;
+    Ok(ConvertSummary { written, skipped, interrupted })
+}
+
+/// The frames into `file`: (written, skipped as unreadable, where it was interrupted).
+fn write_frames(
+    job: &ConvertJob,
+    frames: &[&DatasetFrame],
+    camera: CameraModel,
+    file: &mut McapFile,
+) -> Result<(usize, usize, Option<Interrupted>)> {
     let t = &job.topics;
-    let channels = FrameChannels::add(&mut file, [&t.color, &t.depth, &t.camera_info], job.depth_encoding)?;
+    let channels = FrameChannels::add(file, [&t.color, &t.depth, &t.camera_info], job.depth_encoding)?;
     let mut loader = FrameLoader::new(camera, false);
     let mut scratch = Vec::new();
     let bar = progress_bar(frames.len() as u64, "converting");
@@ -105,7 +129,7 @@ pub fn run(job: &ConvertJob) -> Result<ConvertSummary> {
         bar.inc(1);
         match loader.load(entry) {
             Ok(frame) => {
-                channels.write_frame(&mut file, &frame, entry.rgb_stamp_ns, &mut scratch)?;
+                channels.write_frame(file, &frame, entry.rgb_stamp_ns, &mut scratch)?;
                 written += 1;
             }
             Err(e) => {
@@ -115,7 +139,5 @@ pub fn run(job: &ConvertJob) -> Result<ConvertSummary> {
         }
     }
     bar.finish_and_clear();
-    file.finish()?;
-    std::fs::rename(&partial, &job.out).with_context(|| format!("renaming to {}", job.out.display()))?;
-    Ok(ConvertSummary { written, skipped, interrupted })
+    Ok((written, skipped, interrupted))
 }

@@ -2,7 +2,7 @@
 
 use super::dataset::{initial_pose, thread_pool};
 use super::interrupt::{Interrupted, Stop};
-use super::report::{percentile, progress_bar};
+use super::report::{percentile, progress_bar, write_or_rescue};
 use crate::eval::{ErrorStats, align_poses, associate, ate_translation};
 use crate::geometry::Pose;
 use crate::io::camera_file::read_camera;
@@ -14,7 +14,7 @@ use crate::model::{FORMAT_VERSION, Model, ModelHeader, ModelSource, RootStats, s
 use crate::slam::{EdgeKind, Fused, LoopOutcome, Slam, SlamCounters, SlamParams, TrackStatus};
 use anyhow::{Context, Result, bail};
 use std::fmt::Write as _;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// What to run.
@@ -149,6 +149,7 @@ pub fn run(job: &MapJob) -> Result<MapSummary> {
         );
     }
     let trajectory: Vec<(u64, Pose)> = slam.trajectory().iter().map(|(s, p, _)| (*s, *p)).collect();
+    let mut trajectory_written = Ok(());
     if let Some(path) = &job.trajectory {
         let header = format!(
             "mrsmap map {}: world_from_camera, stamped with depth timestamps\ndataset {} camera {}\n{}",
@@ -157,7 +158,8 @@ pub fn run(job: &MapJob) -> Result<MapSummary> {
             job.camera.display(),
             notes.trim_end()
         );
-        write_trajectory(path, &header, &trajectory)?;
+        // A trajectory that cannot be written does not stop the model (it is said at the end).
+        trajectory_written = write_or_rescue(path, |p| Ok(write_trajectory(p, &header, &trajectory)?));
     }
     let count = |kind| slam.graph.edges.iter().filter(|e| e.kind == kind).count();
     let mut summary = MapSummary {
@@ -175,34 +177,74 @@ pub fn run(job: &MapJob) -> Result<MapSummary> {
         warnings,
         interrupted: done.interrupted,
     };
-    if let Some(out) = &job.out {
-        let t = Instant::now();
-        let fused = pool
-            .install(|| slam.fuse(object.as_ref().map(|o| &o.volume)))
-            .context("fusing the key views into a model (the trajectory was written)")?;
-        summary.fuse_ms = t.elapsed().as_secs_f64() * 1e3;
-        if let (Some(object), Some(volume)) = (&object, &fused.volume)
-            && let Some(tilt) = object.volume.support_tilt_rad(volume).map(f64::to_degrees)
-            && tilt > SUPPORT_TILT_WARNING_DEG
-        {
-            summary.warnings.push(format!(
-                "the support plane was fitted {tilt:.1}° from the plane of the footprint's corners: the object's frame is tilted by as much and its volume may cut the object or keep the support; map from views that see more of the support surface, or check the corners' heights"
-            ));
+    let model_written = match &job.out {
+        Some(out) => {
+            let written = trajectory_written.is_ok() && job.trajectory.is_some();
+            write_model(
+                job,
+                out,
+                &mut slam,
+                object.as_ref(),
+                (&trajectory, written),
+                done.interrupted,
+                &pool,
+                &mut summary,
+            )
         }
-        let header = model_header(job, object.as_ref(), &fused, &frames_span(&trajectory), slam.key_views.len());
-        summary.model_surfels =
-            fused.map.usable_surfels_per_level().iter().copied().take(fused.map.num_levels()).collect();
-        let model = Model { header, map: fused.map };
-        // An interrupted run never replaces a model that exists (even with --force).
-        let path = match done.interrupted {
-            Some(_) if out.exists() => out.with_extension("interrupted.mrsm"),
-            _ => out.clone(),
-        };
-        save(&path, &model)?;
-        summary.model = Some(model.header);
-        summary.model_path = Some(path);
+        None => Ok(()),
+    };
+    // Both said when both failed (each may have been rescued into the temporary folder).
+    if let (Err(model_error), Err(trajectory_error)) = (&model_written, &trajectory_written) {
+        bail!("{model_error}\nand {trajectory_error}\n  caused by: {}", model_error.root_cause());
     }
+    model_written?;
+    trajectory_written?;
     Ok(summary)
+}
+
+/// Fuses the key views into the model and writes it to `out` (beside it, if an
+/// interrupted run would replace a model), rescued into the temporary folder if that
+/// fails.
+#[allow(clippy::too_many_arguments)]
+fn write_model(
+    job: &MapJob,
+    out: &Path,
+    slam: &mut Slam,
+    object: Option<&ObjectSpec>,
+    (trajectory, trajectory_written): (&[(u64, Pose)], bool),
+    interrupted: Option<Interrupted>,
+    pool: &rayon::ThreadPool,
+    summary: &mut MapSummary,
+) -> Result<()> {
+    let t = Instant::now();
+    let fused = pool.install(|| slam.fuse(object.map(|o| &o.volume))).with_context(|| {
+        if trajectory_written {
+            "fusing the key views into a model (the trajectory was written)"
+        } else {
+            "fusing the key views into a model"
+        }
+    })?;
+    summary.fuse_ms = t.elapsed().as_secs_f64() * 1e3;
+    if let (Some(object), Some(volume)) = (object, &fused.volume)
+        && let Some(tilt) = object.volume.support_tilt_rad(volume).map(f64::to_degrees)
+        && tilt > SUPPORT_TILT_WARNING_DEG
+    {
+        summary.warnings.push(format!(
+            "the support plane was fitted {tilt:.1}° from the plane of the footprint's corners: the object's frame is tilted by as much and its volume may cut the object or keep the support; map from views that see more of the support surface, or check the corners' heights"
+        ));
+    }
+    let header = model_header(job, object, &fused, &frames_span(trajectory), slam.key_views.len());
+    summary.model_surfels = fused.map.usable_surfels_per_level().iter().copied().take(fused.map.num_levels()).collect();
+    let model = Model { header, map: fused.map };
+    // An interrupted run never replaces a model that exists (even with --force).
+    let path = match interrupted {
+        Some(_) if out.exists() => out.with_extension("interrupted.mrsm"),
+        _ => out.to_path_buf(),
+    };
+    write_or_rescue(&path, |p| Ok(save(p, &model)?))?;
+    summary.model = Some(model.header);
+    summary.model_path = Some(path);
+    Ok(())
 }
 
 /// Every frame through the five SLAM stages, each timed.

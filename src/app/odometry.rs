@@ -2,17 +2,16 @@
 
 use super::dataset::{initial_pose, thread_pool};
 use super::interrupt::{Interrupted, Stop};
-use super::report::{percentile, progress_bar};
+use super::report::{percentile, progress_bar, write_or_rescue};
 use crate::eval::{ErrorStats, associate, rpe_translation};
 use crate::geometry::Pose;
 use crate::io::camera_file::read_camera;
 use crate::io::frames::{FrameLoader, LoadError};
 use crate::io::image::ImageError;
-use crate::io::tum::{Trajectory, TumDataset, format_pose_line, format_stamp};
+use crate::io::tum::{self, Trajectory, TumDataset, format_stamp};
 use crate::odometry::{Odometry, OdometryParams, TrackOutcome};
 use anyhow::{Context, Result, bail};
 use std::fmt::Write as _;
-use std::io::Write as _;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -205,29 +204,17 @@ pub fn run(job: &OdometryJob) -> Result<OdometrySummary> {
 }
 
 fn write_trajectory(job: &OdometryJob, trajectory: &[(u64, Pose)], notes: &str, comments: &str) -> Result<()> {
-    let mut text = String::new();
-    let _ = writeln!(
-        text,
-        "# mrsmap odometry {}: world_from_camera, stamped with depth timestamps",
-        env!("CARGO_PKG_VERSION")
-    );
-    let _ = writeln!(
-        text,
-        "# dataset {} camera {}{}",
+    let mut header = format!(
+        "mrsmap odometry {}: world_from_camera, stamped with depth timestamps\ndataset {} camera {}{}\n",
+        env!("CARGO_PKG_VERSION"),
         job.dataset.display(),
         job.camera.display(),
         if job.qvga { " (halved: QVGA)" } else { "" }
     );
     for line in notes.lines().chain(comments.lines()) {
-        let _ = writeln!(text, "# {line}");
+        let _ = writeln!(header, "{line}");
     }
-    text.push_str("# timestamp tx ty tz qx qy qz qw\n");
-    for (stamp, pose) in trajectory {
-        let _ = writeln!(text, "{}", format_pose_line(*stamp, pose));
-    }
-    let mut f = std::fs::File::create(&job.out).with_context(|| format!("creating {}", job.out.display()))?;
-    f.write_all(text.as_bytes()).with_context(|| format!("writing {}", job.out.display()))?;
-    Ok(())
+    write_or_rescue(&job.out, |p| Ok(tum::write_trajectory(p, &header, trajectory)?))
 }
 
 /// Prints the summary.

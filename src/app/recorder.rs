@@ -10,6 +10,7 @@
 //! renamed when finished, so a run stopped by SIGINT/SIGTERM leaves a complete file; one
 //! that crashes leaves a `.partial` file that replays up to its end.
 
+use super::report::log_line;
 use super::tracking::StepOutput;
 use crate::frame::{OwnedFrame, RgbdFrame};
 use crate::geometry::Pose;
@@ -68,6 +69,8 @@ pub struct Recorder {
     full: Option<SyncSender<Box<Slot>>>,
     writer: Option<JoinHandle<Result<u64>>>,
     dropped: u64,
+    /// The writer thread has ended early (its error is returned by [`Recorder::finish`]).
+    stopped: bool,
 }
 
 impl std::fmt::Debug for Recorder {
@@ -87,8 +90,10 @@ impl Recorder {
         let mut file = McapFile::create(&partial, mcap::Compression::Lz4)
             .with_context(|| format!("creating the recording {}", partial.display()))?;
         let t = RecordingTopics::default();
-        let frames = FrameChannels::add(&mut file, [&t.color, &t.depth, &t.camera_info], DepthEncoding::M32)?;
-        let poses = PoseChannels::add(&mut file, names)?;
+        let starting = || format!("starting the recording {}", partial.display());
+        let frames = FrameChannels::add(&mut file, [&t.color, &t.depth, &t.camera_info], DepthEncoding::M32)
+            .with_context(starting)?;
+        let poses = PoseChannels::add(&mut file, names).with_context(starting)?;
         let (free_tx, free) = sync_channel(SLOTS);
         let (full, full_rx) = sync_channel::<Box<Slot>>(SLOTS);
         for _ in 0..SLOTS {
@@ -104,10 +109,18 @@ impl Recorder {
                 // Wait once now: the channel allocates its waiting state on a thread's first
                 // blocking receive, which must not happen in the middle of a run.
                 let first = full_rx.recv_timeout(std::time::Duration::from_millis(2)).ok();
+                // A write that fails (a full disk) ends the recording, not the tracker: the
+                // frames before it stay in the `.partial` file, which replays up to its end.
+                let failed = |e: anyhow::Error| {
+                    e.context(format!(
+                        "writing the recording {} (the frames before the failure are in it; `mrsmap replay` reads it up to the damage)",
+                        partial.display()
+                    ))
+                };
                 for slot in first.into_iter().chain(full_rx.iter()) {
                     match last_ns {
                         None => {
-                            out.write(&slot)?;
+                            out.write(&slot).map_err(failed)?;
                             let _ = free_tx.send(slot);
                         }
                         Some(keep) => {
@@ -117,7 +130,7 @@ impl Recorder {
                     }
                 }
                 for slot in &ring.frames {
-                    out.write(slot)?;
+                    out.write(slot).map_err(failed)?;
                 }
                 let written = out.written;
                 out.file.finish().with_context(|| format!("finishing {}", partial.display()))?;
@@ -125,12 +138,15 @@ impl Recorder {
                 Ok(written)
             })
             .context("starting the recorder thread")?;
-        Ok(Recorder { free, full: Some(full), writer: Some(writer), dropped: 0 })
+        Ok(Recorder { free, full: Some(full), writer: Some(writer), dropped: 0, stopped: false })
     }
 
     /// Hands a frame and the poses tracked in it to the writer; allocates nothing (the
     /// frame must not exceed the slots' `max_pixels`).
     pub fn record(&mut self, frame: &RgbdFrame<'_>, out: &StepOutput) {
+        if self.stopped {
+            return;
+        }
         let Ok(mut slot) = self.free.try_recv() else {
             self.dropped += 1;
             return;
@@ -148,7 +164,13 @@ impl Recorder {
         }
         match self.full.as_ref().map(|f| f.try_send(slot)) {
             Some(Ok(())) => {}
-            Some(Err(TrySendError::Full(_) | TrySendError::Disconnected(_))) | None => self.dropped += 1,
+            Some(Err(TrySendError::Disconnected(_))) => {
+                self.stopped = true;
+                log_line(format_args!(
+                    "tracker: the recording stopped: its file could not be written (the reason follows at the end); tracking goes on"
+                ));
+            }
+            Some(Err(TrySendError::Full(_))) | None => self.dropped += 1,
         }
     }
 

@@ -5,7 +5,7 @@ use super::dataset::thread_pool;
 use super::interrupt::{Interrupted, Stop};
 use super::poses_client::{object_trajectory_header, object_trajectory_path};
 use super::read_ahead::ReadAhead;
-use super::report::{percentile, progress_bar};
+use super::report::{percentile, progress_bar, write_or_rescue};
 use super::tracking::{StepOutput, load_models, track_frame, tracker_for};
 use crate::geometry::{CameraModel, Pose};
 use crate::io::mcap_source::ReadMode;
@@ -133,7 +133,7 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
         for (k, name) in names.iter().enumerate() {
             let path = object_trajectory_path(path, name, names.len());
             let header = object_trajectory_header("replay", name, &source, state.interrupted);
-            write_trajectory(&path, &header, &state.tracked[k])?;
+            write_or_rescue(&path, |p| Ok(write_trajectory(p, &header, &state.tracked[k])?))?;
         }
     }
     result?;

@@ -1,4 +1,5 @@
-//! Small helpers for reports: percentiles, progress bars, and checks of output paths.
+//! Small helpers for reports: percentiles, progress bars, and checks and rescue of
+//! output paths.
 
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -65,4 +66,43 @@ pub fn check_outputs<'a>(
         }
     }
     Ok(())
+}
+
+/// Writes a run's output to `path` with `write`. If that fails at the end of a run (the
+/// disk filled up meanwhile, the folder was removed), the output is written into the
+/// system's temporary folder instead and the error says where: the results of a long
+/// run are not lost. (`check_outputs` catches the mistakes that are known before it.)
+pub fn write_or_rescue(
+    path: &std::path::Path,
+    write: impl Fn(&std::path::Path) -> anyhow::Result<()>,
+) -> anyhow::Result<()> {
+    let Err(error) = write(path) else { return Ok(()) };
+    let name = path.file_name().map_or_else(|| "output".into(), |n| n.to_string_lossy().into_owned());
+    let rescue = std::env::temp_dir().join(format!("mrsmap-rescued-{}-{name}", std::process::id()));
+    if rescue != path && write(&rescue).is_ok() {
+        let said = format!("could not write {}; it was written to {} instead", path.display(), rescue.display());
+        return Err(error.context(said));
+    }
+    Err(error)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_output_that_cannot_be_written_is_rescued_into_the_temporary_folder() {
+        let lost = std::path::Path::new("/no/such/folder/model.mrsm");
+        let write = |p: &std::path::Path| std::fs::write(p, b"results").map_err(anyhow::Error::from);
+        let error = write_or_rescue(lost, write).expect_err("the folder does not exist");
+        let rescued = std::env::temp_dir().join(format!("mrsmap-rescued-{}-model.mrsm", std::process::id()));
+        assert!(error.to_string().contains(&format!("written to {} instead", rescued.display())), "{error}");
+        assert_eq!(std::fs::read(&rescued).expect("rescued"), b"results");
+        let _ = std::fs::remove_file(&rescued);
+        // A good path is written and nothing else.
+        let good = std::env::temp_dir().join(format!("mrsmap-write-{}.txt", std::process::id()));
+        write_or_rescue(&good, write).expect("writes");
+        assert!(good.exists() && !rescued.exists());
+        let _ = std::fs::remove_file(&good);
+    }
 }

@@ -4,7 +4,7 @@
 use super::dataset::thread_pool;
 use super::interrupt::{Interrupted, Stop};
 use super::poses_client::{object_trajectory_header, object_trajectory_path};
-use super::report::{percentile, progress_bar};
+use super::report::{percentile, progress_bar, write_or_rescue};
 use super::tracking::{LoadedTracker, StepOutput, invalid_frame, load_tracker, track_frame};
 use crate::eval::{ErrorStats, align_rigid};
 use crate::geometry::Pose;
@@ -145,7 +145,7 @@ pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<TrackDataset
             let path = object_trajectory_path(path, &r.name, config.objects.len());
             let source = format!("dataset {}", job.dataset.display());
             let header = object_trajectory_header("track", &r.name, &source, interrupted);
-            write_trajectory(&path, &header, &tracked[k])?;
+            write_or_rescue(&path, |p| Ok(write_trajectory(p, &header, &tracked[k])?))?;
         }
     }
     Ok(TrackDatasetSummary { objects: results, interrupted })

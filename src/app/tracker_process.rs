@@ -45,7 +45,7 @@ pub enum StopReason {
 }
 
 /// What a run did.
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 pub struct RunSummary {
     /// Frames processed.
     pub frames: u64,
@@ -59,6 +59,8 @@ pub struct RunSummary {
     pub track_ms: Vec<f64>,
     /// Driver send → poses published (ms), same frames.
     pub latency_ms: Vec<f64>,
+    /// Why the recording (`--record`) failed, if it did; the run itself went on.
+    pub recording_error: Option<anyhow::Error>,
 }
 
 /// What the observer sees after each frame (tests use it to arm counters).
@@ -169,6 +171,7 @@ impl<F: WireFrame> LiveTracker<F> {
             stop: StopReason::Signal,
             track_ms: Vec::new(),
             latency_ms: Vec::new(),
+            recording_error: None,
         };
         let mut last_frame = Instant::now();
         let mut waiting_reported = false;
@@ -306,15 +309,17 @@ fn run_live<F: WireFrame>(
     if let Some(options) = record {
         live.record(options)?;
     }
-    let summary = live.run(limits, &mut |_| {});
+    let mut summary = live.run(limits, &mut |_| {})?;
     // The recording is finished whatever ended the loop: nothing recorded is lost.
-    if let Some(stats) = live.finish_recording()? {
-        log_line(format_args!(
+    match live.finish_recording() {
+        Ok(Some(stats)) => log_line(format_args!(
             "tracker: {} frames recorded ({} left out: the writer was behind)",
             stats.written, stats.dropped
-        ));
+        )),
+        Ok(None) => {}
+        Err(e) => summary.recording_error = Some(e),
     }
-    summary
+    Ok(summary)
 }
 
 /// Prints the summary of a run.

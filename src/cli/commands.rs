@@ -75,9 +75,13 @@ pub fn track(a: TrackArgs) -> Result<ExitCode> {
     };
     check_outputs([("--record", a.record.as_deref())])?;
     let record = a.record.map(|path| app::recorder::RecordOptions { path, last_seconds: a.record_last });
-    let summary = app::tracker_process::run(&config, &limits, record.as_ref())?;
+    let mut summary = app::tracker_process::run(&config, &limits, record.as_ref())?;
     app::tracker_process::print_summary(&config, &summary);
-    Ok(ExitCode::SUCCESS)
+    // Tracking went on; the failed recording still fails the command, after the summary.
+    match summary.recording_error.take() {
+        Some(e) => Err(e),
+        None => Ok(ExitCode::SUCCESS),
+    }
 }
 
 /// Default odometry parameters with the map resolution factor λ.

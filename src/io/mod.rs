@@ -1,6 +1,7 @@
 //! Files at the edge: TUM datasets and trajectories, PNG images, camera descriptions.
 //! Maps failures to typed errors that name the file; contains no algorithm.
 
+pub mod atomic;
 pub mod camera_file;
 pub mod compressed_image;
 pub mod frames;

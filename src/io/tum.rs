@@ -298,7 +298,8 @@ pub fn format_pose_line(stamp_ns: u64, pose: &Pose) -> String {
     s
 }
 
-/// Writes a TUM trajectory file with a header comment.
+/// Writes a TUM trajectory file with a header comment, whole or not at all
+/// ([`super::atomic::write_whole`]).
 pub fn write_trajectory(path: &Path, header: &str, poses: &[(u64, Pose)]) -> Result<(), TumError> {
     let mut text = String::new();
     for line in header.lines() {
@@ -309,7 +310,8 @@ pub fn write_trajectory(path: &Path, header: &str, poses: &[(u64, Pose)]) -> Res
         text.push_str(&format_pose_line(*stamp, pose));
         text.push('\n');
     }
-    std::fs::write(path, text).map_err(|source| TumError::Io { path: path.to_path_buf(), source })
+    super::atomic::write_whole(path, text.as_bytes())
+        .map_err(|source| TumError::Io { path: path.to_path_buf(), source })
 }
 
 #[cfg(test)]

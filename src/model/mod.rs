@@ -183,15 +183,14 @@ fn split<'a>(bytes: &'a [u8], origin: &Path) -> Result<(ModelHeader, &'a [u8]), 
 }
 
 /// Writes a model file atomically (to a temporary file, then renamed), so that a
-/// crash never leaves a half-written model in place of a good one.
+/// crash never leaves a half-written model in place of a good one, nor a full disk a
+/// half-written temporary file.
 pub fn save(path: &Path, model: &Model) -> Result<(), ModelError> {
     if !model.map.params().color_scatter {
         return Err(ModelError::NoColorScatter { path: path.to_path_buf() });
     }
-    let io = |source| ModelError::Io { path: path.to_path_buf(), source };
-    let tmp = path.with_extension("mrsm.partial");
-    std::fs::write(&tmp, encode(model)).map_err(io)?;
-    std::fs::rename(&tmp, path).map_err(io)
+    crate::io::atomic::write_whole(path, &encode(model))
+        .map_err(|source| ModelError::Io { path: path.to_path_buf(), source })
 }
 
 /// Reads and checks a model file.
