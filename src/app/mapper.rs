@@ -2,7 +2,7 @@
 
 use super::dataset::{initial_pose, thread_pool};
 use super::interrupt::{Interrupted, Stop};
-use super::report::{percentile, progress_bar, write_or_rescue};
+use super::report::{both_written, percentile, progress_bar, write_or_rescue};
 use crate::eval::{ErrorStats, align_poses, associate, ate_translation};
 use crate::geometry::Pose;
 use crate::io::camera_file::read_camera;
@@ -194,11 +194,7 @@ pub fn run(job: &MapJob) -> Result<MapSummary> {
         None => Ok(()),
     };
     // Both said when both failed (each may have been rescued into the temporary folder).
-    if let (Err(model_error), Err(trajectory_error)) = (&model_written, &trajectory_written) {
-        bail!("{model_error}\nand {trajectory_error}\n  caused by: {}", model_error.root_cause());
-    }
-    model_written?;
-    trajectory_written?;
+    both_written(model_written, trajectory_written)?;
     Ok(summary)
 }
 

@@ -86,6 +86,15 @@ pub fn write_or_rescue(
     Err(error)
 }
 
+/// The outcome of writing two outputs, each tried whatever became of the other: both
+/// errors said when both failed.
+pub fn both_written(first: anyhow::Result<()>, second: anyhow::Result<()>) -> anyhow::Result<()> {
+    match (first, second) {
+        (Err(a), Err(b)) => Err(anyhow::anyhow!("{a}\nand {b}\n  caused by: {}", a.root_cause())),
+        (a, b) => a.and(b),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -104,5 +113,15 @@ mod tests {
         write_or_rescue(&good, write).expect("writes");
         assert!(good.exists() && !rescued.exists());
         let _ = std::fs::remove_file(&good);
+    }
+
+    #[test]
+    fn two_outputs_are_each_tried_and_both_failures_said() {
+        let fail = |what: &str| Err::<(), _>(anyhow::anyhow!("could not write {what}"));
+        assert!(both_written(Ok(()), Ok(())).is_ok());
+        assert_eq!(both_written(fail("a"), Ok(())).expect_err("a failed").to_string(), "could not write a");
+        assert_eq!(both_written(Ok(()), fail("b")).expect_err("b failed").to_string(), "could not write b");
+        let both = both_written(fail("a"), fail("b")).expect_err("both failed").to_string();
+        assert!(both.starts_with("could not write a\nand could not write b"), "{both}");
     }
 }
