@@ -5,7 +5,7 @@ use super::dataset::thread_pool;
 use super::interrupt::{Interrupted, Stop};
 use super::poses_client::{object_trajectory_header, object_trajectory_path};
 use super::read_ahead::ReadAhead;
-use super::report::{percentile, progress_bar, write_or_rescue};
+use super::report::{both_written, percentile, progress_bar, write_or_rescue};
 use super::tracking::{StepOutput, load_models, track_frame, tracker_for};
 use crate::geometry::{CameraModel, Pose};
 use crate::io::mcap_source::ReadMode;
@@ -130,11 +130,15 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
     }
     if let Some(path) = &job.trajectory {
         let source = format!("recording {}", job.input.display());
+        // Every object's file is tried, whatever became of the others.
+        let mut written = Ok(());
         for (k, name) in names.iter().enumerate() {
             let path = object_trajectory_path(path, name, names.len());
             let header = object_trajectory_header("replay", name, &source, state.interrupted);
-            write_or_rescue(&path, |p| Ok(write_trajectory(p, &header, &state.tracked[k])?))?;
+            let this = write_or_rescue(&path, |p| Ok(write_trajectory(p, &header, &state.tracked[k])?));
+            written = both_written(written, this);
         }
+        written?;
     }
     result?;
     Ok(ReplaySummary {

@@ -90,7 +90,14 @@ pub fn write_or_rescue(
 /// errors said when both failed.
 pub fn both_written(first: anyhow::Result<()>, second: anyhow::Result<()>) -> anyhow::Result<()> {
     match (first, second) {
-        (Err(a), Err(b)) => Err(anyhow::anyhow!("{a}\nand {b}\n  caused by: {}", a.root_cause())),
+        (Err(a), Err(b)) => {
+            // `a` may itself hold two (or more) failures and their cause: said once.
+            const CAUSE: &str = "\n  caused by: ";
+            let (said, cause) = (a.to_string(), a.root_cause().to_string());
+            let said = said.split(CAUSE).next().unwrap_or_default();
+            let cause = cause.rsplit(CAUSE).next().unwrap_or_default();
+            Err(anyhow::anyhow!("{said}\nand {b}{CAUSE}{cause}"))
+        }
         (a, b) => a.and(b),
     }
 }
@@ -123,5 +130,13 @@ mod tests {
         assert_eq!(both_written(Ok(()), fail("b")).expect_err("b failed").to_string(), "could not write b");
         let both = both_written(fail("a"), fail("b")).expect_err("both failed").to_string();
         assert!(both.starts_with("could not write a\nand could not write b"), "{both}");
+        // Three, with the first's cause said once, at the end.
+        let io = std::io::Error::other("No space left on device");
+        let a = Err(anyhow::Error::from(io).context("could not write a"));
+        let three = both_written(both_written(a, fail("b")), fail("c")).expect_err("all failed").to_string();
+        assert_eq!(
+            three,
+            "could not write a\nand could not write b\nand could not write c\n  caused by: No space left on device"
+        );
     }
 }

@@ -4,7 +4,7 @@
 use super::dataset::thread_pool;
 use super::interrupt::{Interrupted, Stop};
 use super::poses_client::{object_trajectory_header, object_trajectory_path};
-use super::report::{percentile, progress_bar, write_or_rescue};
+use super::report::{both_written, percentile, progress_bar, write_or_rescue};
 use super::tracking::{LoadedTracker, StepOutput, invalid_frame, load_tracker, track_frame};
 use crate::eval::{ErrorStats, align_rigid};
 use crate::geometry::Pose;
@@ -126,6 +126,8 @@ pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<TrackDataset
         }
     }
     bar.finish_and_clear();
+    // Every object's trajectory is tried, whatever became of the others.
+    let mut written = Ok(());
     for (k, r) in results.iter_mut().enumerate() {
         let pairs: Vec<(Pose, Pose)> = tracked[k]
             .iter()
@@ -145,9 +147,11 @@ pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<TrackDataset
             let path = object_trajectory_path(path, &r.name, config.objects.len());
             let source = format!("dataset {}", job.dataset.display());
             let header = object_trajectory_header("track", &r.name, &source, interrupted);
-            write_or_rescue(&path, |p| Ok(write_trajectory(p, &header, &tracked[k])?))?;
+            let this = write_or_rescue(&path, |p| Ok(write_trajectory(p, &header, &tracked[k])?));
+            written = both_written(written, this);
         }
     }
+    written?;
     Ok(TrackDatasetSummary { objects: results, interrupted })
 }
 
