@@ -124,23 +124,27 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
     }
     bar.finish_and_clear();
     let reader = frames.finish().context("the reader thread failed")?;
+    // Every output is tried whatever became of the others (a full disk): the poses
+    // tracked so far reach the trajectories even when the MCAP output failed.
+    let mut written = result;
     if let (Some((file, _)), Some(partial), Some(out)) = (output, &partial, &job.out) {
-        file.finish().with_context(|| format!("finishing {}", partial.display()))?;
-        std::fs::rename(partial, out).with_context(|| format!("renaming to {}", out.display()))?;
+        let finished = file
+            .finish()
+            .map_err(anyhow::Error::from)
+            .and_then(|()| Ok(std::fs::rename(partial, out)?))
+            .with_context(|| format!("finishing {} (what was written is kept in it)", partial.display()));
+        written = both_written(written, finished);
     }
     if let Some(path) = &job.trajectory {
         let source = format!("recording {}", job.input.display());
-        // Every object's file is tried, whatever became of the others.
-        let mut written = Ok(());
         for (k, name) in names.iter().enumerate() {
             let path = object_trajectory_path(path, name, names.len());
             let header = object_trajectory_header("replay", name, &source, state.interrupted);
             let this = write_or_rescue(&path, |p| Ok(write_trajectory(p, &header, &state.tracked[k])?));
             written = both_written(written, this);
         }
-        written?;
     }
-    result?;
+    written?;
     Ok(ReplaySummary {
         mode: reader.mode(),
         stats: reader.stats(),
