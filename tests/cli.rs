@@ -517,3 +517,48 @@ fn offline_tracking_every_nth_frame() {
     let err = mrsmap::app::track_dataset::run(&config, &job).expect_err("every 0 is refused");
     assert!(err.to_string().contains("--every"), "{err}");
 }
+
+#[test]
+fn outputs_that_fail_at_the_end_of_a_run_are_rescued_not_lost() {
+    // A full disk at the end of a run, made reproducible: the temporary file each output
+    // is written through is a link to /dev/full, where every write fails with ENOSPC.
+    let dir = temp_dir("cli-rescue");
+    let (clip, camera) = (teddy_clip(), fr3_camera_file());
+    let (traj, timings) = (dir.join("odo.txt"), dir.join("timings.csv"));
+    for p in [&traj, &timings] {
+        let partial = std::path::PathBuf::from(format!("{}.partial", p.display()));
+        let _ = std::fs::remove_file(&partial);
+        std::os::unix::fs::symlink("/dev/full", &partial).expect("symlink");
+    }
+    let args = ["odometry", "--dataset", path_str(&clip), "--camera", path_str(&camera), "--out", path_str(&traj)];
+    let out = mrsmap(&[&args[..], &["--timings", path_str(&timings)]].concat());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    // Both outputs are tried and both rescued; the cause is said once.
+    let rescued = |name: &str| std::env::temp_dir().join(format!("mrsmap-rescued-{}-{name}", out_pid(&err, name)));
+    let (rescued_traj, rescued_timings) = (rescued("odo.txt"), rescued("timings.csv"));
+    assert!(err.contains(&format!("written to {} instead", rescued_traj.display())), "{err}");
+    assert!(err.contains(&format!("\nand could not write {}", timings.display())), "{err}");
+    assert_eq!(err.matches("No space left on device").count(), 1, "{err}");
+    // The rescued trajectory is the one a good disk gets, and nothing is left behind.
+    let good = dir.join("good.txt");
+    assert!(
+        mrsmap(&["odometry", "--dataset", path_str(&clip), "--camera", path_str(&camera), "--out", path_str(&good)])
+            .status
+            .success()
+    );
+    assert_eq!(std::fs::read(&rescued_traj).expect("rescued"), std::fs::read(&good).expect("good"));
+    assert!(std::fs::read_to_string(&rescued_timings).expect("rescued").starts_with("stamp,build_ms"));
+    assert!(!traj.exists() && !timings.exists());
+    for p in [rescued_traj, rescued_timings] {
+        let _ = std::fs::remove_file(p);
+    }
+}
+
+/// The process id in a rescued file's name as the error gives it.
+fn out_pid(err: &str, name: &str) -> String {
+    let tail = format!("-{name} instead");
+    let end = err.find(&tail).expect("a rescued file");
+    let start = err[..end].rfind("mrsmap-rescued-").expect("its prefix") + "mrsmap-rescued-".len();
+    err[start..end].to_string()
+}
