@@ -309,9 +309,20 @@ fn run_live<F: WireFrame>(
     if let Some(options) = record {
         live.record(options)?;
     }
-    let mut summary = live.run(limits, &mut |_| {})?;
-    // The recording is finished whatever ended the loop: nothing recorded is lost.
-    match live.finish_recording() {
+    let run = live.run(limits, &mut |_| {});
+    // The recording is finished whatever ended the loop (an error too): nothing recorded
+    // is lost.
+    let recording = live.finish_recording();
+    let mut summary = match run {
+        Ok(summary) => summary,
+        Err(e) => {
+            if let Err(r) = &recording {
+                log_line(format_args!("tracker: the recording failed too: {r:#}"));
+            }
+            return Err(e);
+        }
+    };
+    match recording {
         Ok(Some(stats)) => log_line(format_args!(
             "tracker: {} frames recorded ({} left out: the writer was behind)",
             stats.written, stats.dropped
