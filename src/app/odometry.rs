@@ -2,7 +2,7 @@
 
 use super::dataset::{initial_pose, thread_pool};
 use super::interrupt::{Interrupted, Stop};
-use super::report::{both_written, percentile, progress_bar, write_or_rescue};
+use super::report::{both_written, percentile, progress_bar, write_bytes_or_rescue, write_or_rescue};
 use crate::eval::{ErrorStats, associate, rpe_translation};
 use crate::geometry::Pose;
 use crate::io::camera_file::read_camera;
@@ -184,12 +184,8 @@ pub fn run(job: &OdometryJob) -> Result<OdometrySummary> {
         bail!("no frame of {} could be processed", job.dataset.display());
     }
     let trajectory_written = write_trajectory(job, &rec.trajectory, &notes, &rec.comments);
-    let timings_written = job.timings.as_ref().map_or(Ok(()), |path| {
-        write_or_rescue(path, |p| {
-            crate::io::atomic::write_whole(p, rec.timings.as_bytes())
-                .with_context(|| format!("writing {}", p.display()))
-        })
-    });
+    let timings_written =
+        job.timings.as_ref().map_or(Ok(()), |path| write_bytes_or_rescue(path, rec.timings.as_bytes()));
     both_written(trajectory_written, timings_written)?;
     let mut s = rec.summary;
     if let Some(gt) = &dataset.groundtruth {

@@ -2,7 +2,7 @@
 //! and optionally writes TUM trajectories — the example a robot integrator copies.
 
 use super::interrupt::Interrupted;
-use super::report::{both_written, log_line, percentile, write_or_rescue};
+use super::report::{both_written, log_line, percentile, write_bytes_or_rescue};
 use crate::geometry::Pose;
 use crate::io::ipc::{self, IpcError, now_ns};
 use crate::io::tum::{format_pose_line, format_stamp};
@@ -180,10 +180,7 @@ fn write_trajectories(out: &Path, trajectories: &BTreeMap<String, String>) -> Re
         let text = format!(
             "# mrsmap poses: object_from_camera of '{name}' (the camera in the object frame), stamped with the frames' depth timestamps\n# timestamp tx ty tz qx qy qz qw\n{lines}"
         );
-        let this = write_or_rescue(&path, |p| {
-            crate::io::atomic::write_whole(p, text.as_bytes()).with_context(|| format!("writing {}", p.display()))
-        });
-        written = both_written(written, this);
+        written = both_written(written, write_bytes_or_rescue(&path, text.as_bytes()));
     }
     written
 }

@@ -86,6 +86,15 @@ pub fn write_or_rescue(
     Err(error)
 }
 
+/// [`write_or_rescue`] for a file of `bytes`, written whole or not at all
+/// ([`crate::io::atomic::write_whole`]).
+pub fn write_bytes_or_rescue(path: &std::path::Path, bytes: &[u8]) -> anyhow::Result<()> {
+    use anyhow::Context as _;
+    write_or_rescue(path, |p| {
+        crate::io::atomic::write_whole(p, bytes).with_context(|| format!("writing {}", p.display()))
+    })
+}
+
 /// The outcome of writing two outputs, each tried whatever became of the other: both
 /// errors said when both failed.
 pub fn both_written(first: anyhow::Result<()>, second: anyhow::Result<()>) -> anyhow::Result<()> {

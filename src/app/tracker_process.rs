@@ -81,10 +81,9 @@ pub struct LiveTracker<F: WireFrame> {
     node: Node<Ipc>,
     listener: Listener<Ipc>,
     core: Core<F>,
-    /// Where frames come from and poses go, for the log.
-    ports: String,
-    /// The frame service, for the log.
+    /// The frame and pose services, for the log.
     frames_name: String,
+    poses_name: String,
 }
 
 /// The part of the process the loop changes (apart from the listener the WaitSet holds).
@@ -153,13 +152,8 @@ impl<F: WireFrame> LiveTracker<F> {
             last_sequence: None,
             recorder: None,
         };
-        let objects = core.names.iter().map(|n| format!("'{n}'")).collect::<Vec<_>>().join(", ");
-        let ports = format!(
-            "tracking {objects} on {} thread(s); frames from {frames_name}, poses on {}",
-            core.pool.current_num_threads(),
-            config.poses_service
-        );
-        Ok(LiveTracker { node, listener, core, ports, frames_name })
+        let poses_name = config.poses_service.clone();
+        Ok(LiveTracker { node, listener, core, frames_name, poses_name })
     }
 
     /// The loop: wait for a frame, track, publish; until a signal or a limit.
@@ -175,7 +169,13 @@ impl<F: WireFrame> LiveTracker<F> {
         };
         let mut last_frame = Instant::now();
         let mut waiting_reported = false;
-        log_line(format_args!("tracker: ready; {}; waiting for frames", self.ports));
+        let objects = self.core.names.iter().map(|n| format!("'{n}'")).collect::<Vec<_>>().join(", ");
+        log_line(format_args!(
+            "tracker: ready; tracking {objects} on {} thread(s); frames from {}, poses on {}; waiting for frames",
+            self.core.pool.current_num_threads(),
+            self.frames_name,
+            self.poses_name
+        ));
         loop {
             // Blocks until the driver notifies (or 250 ms pass); no polling.
             // A signal interrupts the wait: that is not an error but the stop request.
