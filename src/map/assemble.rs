@@ -5,6 +5,7 @@
 use super::aggregate::{Aggregate, Band};
 use super::descriptor::{DESCRIPTOR_LEN, Descriptor, compute_descriptors};
 use super::evaluate::{CHUNK, RawMoments, estimate_normals, evaluate_beside_neighbors, surfel_neighborhoods};
+use super::jobs::ItemJobs;
 use super::params::MAX_LEVELS;
 use super::radix::{Coded, sort_by_code};
 use super::stats::SurfelStats;
@@ -206,7 +207,7 @@ impl Assembly {
             let _ = work.push(InsertWork { chunk: chunk.clone(), stats: s_mine, view_dirs: v_mine });
         }
         let (order, target) = (&self.order, &self.target);
-        work.as_mut_slice().par_iter_mut().for_each(|InsertWork { chunk, stats, view_dirs }| {
+        work.as_mut_slice().par_iter_mut().item_jobs().for_each(|InsertWork { chunk, stats, view_dirs }| {
             for &k in &self.by_level[chunk.positions.clone()] {
                 let (_, b, i) = order[k as usize];
                 let band = &bands[b as usize];
@@ -345,7 +346,7 @@ fn merge_bottom_up(map: &mut SurfelMap) {
         let (vd_coarser, vd_finer) = map.view_dirs.split_at_mut(end);
         let parents = &mut coarser[first..];
         let parent_dirs = &mut vd_coarser[first..];
-        parents.par_chunks_mut(CHUNK).zip(parent_dirs.par_chunks_mut(CHUNK)).enumerate().for_each(
+        parents.par_chunks_mut(CHUNK).zip(parent_dirs.par_chunks_mut(CHUNK)).enumerate().item_jobs().for_each(
             |(c, (stats, dirs))| {
                 for (k, (st, vd)) in stats.iter_mut().zip(dirs.iter_mut()).enumerate() {
                     let s = &surfels[first + c * CHUNK + k];

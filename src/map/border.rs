@@ -19,6 +19,7 @@
 //! (squared range 0), and only such pixels — a few percent — take the scalar path that
 //! finds the nearest valid neighbour across holes.
 
+use super::jobs::ItemJobs;
 use super::params::MapParams;
 use rayon::prelude::*;
 use std::ops::Range;
@@ -255,6 +256,7 @@ pub(crate) fn mark_borders(
         .zip(ends.par_chunks_mut(scratch.max_width))
         .zip(work.par_chunks_mut(work_len))
         .enumerate()
+        .item_jobs()
         .for_each(|(b, ((band_flags, band_ends), band_work))| {
             let start = rows.start + b * BORDER_BAND_ROWS;
             let band_work = BandWork::split(band_work, cols.len());

@@ -4,6 +4,7 @@ use super::SurfelMap;
 use super::aggregate::{AggregationInput, BAND_ROWS, Band, Placement};
 use super::assemble::Assembly;
 use super::border::{BorderScratch, mark_borders};
+use super::jobs::ItemJobs;
 use super::params::{MAX_LEVELS, MapParams};
 use super::region::{ImageRegion, raw_depth_interval};
 use crate::frame::{FrameError, RayTable, RgbdFrame};
@@ -210,7 +211,7 @@ impl MapBuilder {
             }),
             spans: region.spans.as_ref(),
         };
-        self.bands[..self.active_bands].par_iter_mut().for_each(|b| b.aggregate(&input));
+        self.bands[..self.active_bands].par_iter_mut().item_jobs().for_each(|b| b.aggregate(&input));
         Ok(())
     }
 

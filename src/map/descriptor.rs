@@ -13,6 +13,7 @@
 //! neighbours dominate quadratically); we use the normalised form described in the paper.
 
 use super::evaluate::CHUNK;
+use super::jobs::ItemJobs;
 use super::tree::{NONE, SELF_NEIGHBOR};
 use super::{Surfel, SurfelMap};
 use nalgebra::Vector3;
@@ -110,7 +111,7 @@ pub(crate) fn compute_descriptors(map: &mut SurfelMap, simple: &mut [Descriptor]
     let rows = &map.surfel_neighbors;
     let surfels = &map.surfels;
     let normals = &map.normals;
-    simple.par_chunks_mut(CHUNK).enumerate().for_each(|(c, out)| {
+    simple.par_chunks_mut(CHUNK).enumerate().item_jobs().for_each(|(c, out)| {
         for (k, h) in out.iter_mut().enumerate() {
             let idx = c * CHUNK + k;
             let me = &surfels[idx];
@@ -129,7 +130,7 @@ pub(crate) fn compute_descriptors(map: &mut SurfelMap, simple: &mut [Descriptor]
         }
     });
     let simple = &*simple;
-    map.descriptors.par_chunks_mut(CHUNK).enumerate().for_each(|(c, out)| {
+    map.descriptors.par_chunks_mut(CHUNK).enumerate().item_jobs().for_each(|(c, out)| {
         for (k, h) in out.iter_mut().enumerate() {
             let idx = c * CHUNK + k;
             let me = &surfels[idx];

@@ -2,6 +2,7 @@
 //! normals (§3.1). Every pass is per surfel and writes only its own entry, so the
 //! parallel passes give the same result for any number of threads.
 
+use super::jobs::ItemJobs;
 use super::params::MapParams;
 use super::stats::{SurfelStats, packed_index};
 use super::tree::{NONE, Node};
@@ -16,7 +17,7 @@ pub(crate) fn surfel_neighborhoods(map: &mut SurfelMap) {
     // Every row is written below.
     super::resize_for_overwrite(&mut map.surfel_neighbors, [NONE; 27], n);
     let (nodes, neighbors, surfels) = (&map.tree.nodes, &map.tree.neighbors, &map.surfels);
-    map.surfel_neighbors.par_chunks_mut(CHUNK).enumerate().for_each(|(c, out)| {
+    map.surfel_neighbors.par_chunks_mut(CHUNK).enumerate().item_jobs().for_each(|(c, out)| {
         for (k, row) in out.iter_mut().enumerate() {
             let s = &surfels[c * CHUNK + k];
             for (slot, &nb) in row.iter_mut().zip(&neighbors[s.node as usize]) {
@@ -137,21 +138,23 @@ fn evaluate_statistics(
 ) {
     let thresholds = params.level_thresholds_r2();
     let top = params.num_levels - 1;
-    surfels.par_chunks_mut(CHUNK).zip(raw.par_chunks_mut(CHUNK)).enumerate().for_each(|(c, (surfels, raw))| {
-        for (k, (s, r)) in surfels.iter_mut().zip(raw.iter_mut()).enumerate() {
-            let st = &stats[c * CHUNK + k];
-            *r = RawMoments::of(st);
-            let node = &nodes[s.node as usize];
-            evaluate_one(params, node, st, s);
-            if params.exclude_level_boundaries
-                && (node.level as usize) < top
-                && cut_by_level_range(params, node, &thresholds)
-            {
-                s.excluded = true;
-                s.usable = false;
+    surfels.par_chunks_mut(CHUNK).zip(raw.par_chunks_mut(CHUNK)).enumerate().item_jobs().for_each(
+        |(c, (surfels, raw))| {
+            for (k, (s, r)) in surfels.iter_mut().zip(raw.iter_mut()).enumerate() {
+                let st = &stats[c * CHUNK + k];
+                *r = RawMoments::of(st);
+                let node = &nodes[s.node as usize];
+                evaluate_one(params, node, st, s);
+                if params.exclude_level_boundaries
+                    && (node.level as usize) < top
+                    && cut_by_level_range(params, node, &thresholds)
+                {
+                    s.excluded = true;
+                    s.usable = false;
+                }
             }
-        }
-    });
+        },
+    );
 }
 
 /// Whether the cell's farthest corner from the sensor (at the origin) lies beyond the
@@ -191,7 +194,7 @@ pub(crate) fn estimate_normals(map: &mut SurfelMap, raw: &[RawMoments]) {
     let smooth = map.params.smooth_normals;
     let surfel_neighbors = &map.surfel_neighbors;
     let view_dirs = &map.view_dirs;
-    map.surfels.par_chunks_mut(CHUNK).zip(map.normals.par_chunks_mut(CHUNK)).enumerate().for_each(
+    map.surfels.par_chunks_mut(CHUNK).zip(map.normals.par_chunks_mut(CHUNK)).enumerate().item_jobs().for_each(
         |(c, (surfels, normals))| {
             for (k, (s, normal)) in surfels.iter_mut().zip(normals.iter_mut()).enumerate() {
                 if !s.valid {

@@ -16,6 +16,7 @@ mod build;
 mod descriptor;
 mod evaluate;
 pub mod gate_cells;
+pub(crate) mod jobs;
 pub mod params;
 mod radix;
 pub mod region;

@@ -5,6 +5,7 @@
 //! the cell of point `p` at level `l` has integer key `⌊p / res_l⌋` and the parent key is
 //! `key >> 1` (floor division, also for negative keys).
 
+use super::jobs::ItemJobs;
 use super::params::MAX_LEVELS;
 use rayon::prelude::*;
 
@@ -374,7 +375,7 @@ impl NeighborFill<'_> {
         // Every row is written below (the levels' ranges cover all nodes).
         super::resize_for_overwrite(neighbors, [NONE; 27], nodes.len());
         let (start, end) = (level_start[top] as usize, level_end[top] as usize);
-        neighbors[start..end].par_chunks_mut(NEIGHBOR_CHUNK).enumerate().for_each(|(c, out)| {
+        neighbors[start..end].par_chunks_mut(NEIGHBOR_CHUNK).enumerate().item_jobs().for_each(|(c, out)| {
             for (k, nb) in out.iter_mut().enumerate() {
                 let key = nodes[start + c * NEIGHBOR_CHUNK + k].key;
                 for (slot, d) in nb.iter_mut().zip(&NEIGHBOR_OFFSETS) {
@@ -385,7 +386,7 @@ impl NeighborFill<'_> {
         for level in (0..top).rev() {
             let (start, end) = (level_start[level] as usize, level_end[level] as usize);
             let (coarser, this) = neighbors.split_at_mut(start);
-            this[..end - start].par_chunks_mut(NEIGHBOR_CHUNK).enumerate().for_each(|(c, out)| {
+            this[..end - start].par_chunks_mut(NEIGHBOR_CHUNK).enumerate().item_jobs().for_each(|(c, out)| {
                 for (k, nb) in out.iter_mut().enumerate() {
                     *nb = neighbors_from_parent(nodes, coarser, start + c * NEIGHBOR_CHUNK + k);
                 }

@@ -21,6 +21,7 @@ use super::params::RegistrationParams;
 use super::workspace::{Association, NODE_CHUNK, Partial, PassState};
 use crate::frame::rays::VIEW_AXES;
 use crate::geometry::Pose;
+use crate::map::jobs::ItemJobs;
 use crate::map::tree::NEIGHBOR_OFFSETS;
 use crate::map::{MAX_LEVELS, NONE, Node, SELF_NEIGHBOR, descriptor_distance2};
 use nalgebra::Vector3;
@@ -104,7 +105,7 @@ pub(crate) fn associate(
         let finer = Finer { assoc: finer, offset: range.end };
         let slots = &mut partials[offsets[level]..offsets[level] + range.len().div_ceil(NODE_CHUNK)];
         let cubes = last_cube[range.clone()].par_chunks_mut(NODE_CHUNK);
-        this.par_chunks_mut(NODE_CHUNK).zip(cubes).zip(slots.par_iter_mut()).enumerate().for_each(
+        this.par_chunks_mut(NODE_CHUNK).zip(cubes).zip(slots.par_iter_mut()).enumerate().item_jobs().for_each(
             |(c, ((chunk, cubes), out))| {
                 let mut acc = Partial::ZERO;
                 for (k, (a, cube)) in chunk.iter_mut().zip(cubes).enumerate() {

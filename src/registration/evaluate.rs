@@ -8,6 +8,7 @@ use super::cost::{TermInput, likelihood_cost, likelihood_term, lm_term, mahalano
 use super::params::RegistrationParams;
 use super::workspace::{Association, NODE_CHUNK, Partial};
 use crate::geometry::Pose;
+use crate::map::jobs::ItemJobs;
 use crate::map::{MAX_LEVELS, NONE, Surfel, SurfelMap, neighbor_index};
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
@@ -229,7 +230,7 @@ pub(crate) fn sum(
 ) -> Partial {
     let offsets = slot_offsets(input.scene, levels.0, levels.1);
     let slots = offsets[MAX_LEVELS];
-    partials[..slots].par_iter_mut().enumerate().for_each(|(slot, out)| {
+    partials[..slots].par_iter_mut().enumerate().item_jobs().for_each(|(slot, out)| {
         let mut acc = Partial::ZERO;
         for a in slot_associations(input.scene, assoc, &offsets, levels, slot) {
             input.accumulate(a, what, &mut acc);
@@ -251,7 +252,7 @@ pub(crate) fn sum_with_lm(
 ) -> (Partial, Partial) {
     let offsets = slot_offsets(input.scene, levels.0, levels.1);
     let slots = offsets[MAX_LEVELS];
-    partials[..slots].par_iter_mut().zip(lm_partials[..slots].par_iter_mut()).enumerate().for_each(
+    partials[..slots].par_iter_mut().zip(lm_partials[..slots].par_iter_mut()).enumerate().item_jobs().for_each(
         |(slot, (out, lm_out))| {
             let (mut acc, mut lm) = (Partial::ZERO, Partial::ZERO);
             for a in slot_associations(input.scene, assoc, &offsets, levels, slot) {

@@ -12,6 +12,7 @@
 use super::associate::DirCandidates;
 use super::cost::{rotate_symmetric, symmetric_inverse};
 use crate::geometry::Pose;
+use crate::map::jobs::ItemJobs;
 use crate::map::{NONE, SELF_NEIGHBOR, SurfelMap};
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
@@ -66,8 +67,12 @@ impl MatchScratch {
         let near = DirCandidates::new(b_from_a, VIEW_DIR_MIN_COS);
         self.partial.clear();
         self.partial.resize(a.surfels().len().div_ceil(CHUNK), (0.0, 0, 0));
-        self.partial.par_iter_mut().zip(a.surfels().par_chunks(CHUNK)).zip(a.normals().par_chunks(CHUNK)).for_each(
-            |((acc, surfels), normals)| {
+        self.partial
+            .par_iter_mut()
+            .zip(a.surfels().par_chunks(CHUNK))
+            .zip(a.normals().par_chunks(CHUNK))
+            .item_jobs()
+            .for_each(|((acc, surfels), normals)| {
                 *acc = (0.0, 0, 0);
                 for (s, n) in surfels.iter().zip(normals) {
                     if !s.usable() || s.level as usize >= b.num_levels() {
@@ -86,8 +91,7 @@ impl MatchScratch {
                         acc.1 += 1;
                     }
                 }
-            },
-        );
+            });
         let (total, matched, surfels) = self.partial.iter().fold((0.0, 0, 0), |a, p| (a.0 + p.0, a.1 + p.1, a.2 + p.2));
         MatchScore { total, matched, surfels }
     }
