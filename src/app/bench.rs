@@ -4,6 +4,7 @@
 //! every frame and registers it to the previous one, as odometry does. The first frame
 //! of each pass (nothing to register to) is not counted.
 
+use super::dataset::install_spinning;
 use super::report::percentile;
 use crate::frame::RgbdFrame;
 use crate::geometry::{CameraModel, Pose};
@@ -102,9 +103,9 @@ fn run_one(
         for (i, d) in frames.iter().enumerate() {
             let frame = RgbdFrame::new(d.stamp_ns, camera, &d.rgb, &d.depth)?;
             let t0 = Instant::now();
-            pool.install(|| odometry.build(&frame))?;
+            install_spinning(pool, || odometry.build(&frame))?;
             let t1 = Instant::now();
-            let outcome = pool.install(|| odometry.track());
+            let outcome = install_spinning(pool, || odometry.track());
             let t2 = Instant::now();
             if matches!(outcome, TrackOutcome::Failed(_)) {
                 r.failures += 1;
@@ -276,7 +277,9 @@ pub fn tracking_ms(
     half: bool,
     gap: std::time::Duration,
 ) -> Result<TrackingTimes> {
-    use super::tracking::{LoadedTracker, StepOutput, load_tracker, track_frame};
+    use super::tracking::{LoadedTracker, Pace, StepOutput, load_tracker, track_frame};
+    // Frames after an idle gap are paced as a camera's.
+    let pace = if gap.is_zero() { Pace::BackToBack } else { Pace::Live };
     let camera = read_camera(&job.camera)?;
     let dataset = TumDataset::open(&job.dataset).with_context(|| format!("opening {}", job.dataset.display()))?;
     let mut loader = FrameLoader::new(camera, half);
@@ -316,7 +319,7 @@ pub fn tracking_ms(
                 if !gap.is_zero() {
                     std::thread::sleep(gap);
                 }
-                track_frame(tracker, &pool, &frame, &mut out);
+                track_frame(tracker, &pool, &frame, &mut out, pace);
                 ms.push((f64::from(out.build_ms[0]), f64::from(out.register_ms[0])));
             }
         }

@@ -33,6 +33,45 @@ pub fn initial_pose(dataset: &TumDataset, stamp_ns: u64, notes: &mut String) -> 
     }
 }
 
+/// Runs `work` inside `pool`, one more worker spinning until it is done: taking the
+/// jobs `work` shares out as soon as they appear, instead of falling asleep between
+/// them and being woken for the next (tens of microseconds each on a virtual machine).
+/// For frames processed back to back (replay, offline tracking, odometry over a
+/// dataset): there it made the tracker's step 4–6 % faster (`docs/benchmarks.md`, "Two
+/// cores, one job per piece"). Not for the live tracker: after the camera's idle gap
+/// between frames a spinning worker slowed the step by half instead (the host seems to
+/// give both virtual cores one physical core then). The results do not depend on it.
+pub fn install_spinning<R: Send>(pool: &rayon::ThreadPool, work: impl FnOnce() -> R + Send) -> R {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    /// Sets the flag when dropped: also when `work` panics, or the spinner would wait
+    /// for ever (and `join` with it).
+    struct SetOnDrop<'a>(&'a AtomicBool);
+    impl Drop for SetOnDrop<'_> {
+        fn drop(&mut self) {
+            self.0.store(true, Ordering::Release);
+        }
+    }
+    pool.install(|| {
+        let done = AtomicBool::new(false);
+        let (result, ()) = rayon::join(
+            || {
+                let _done = SetOnDrop(&done);
+                work()
+            },
+            || {
+                // Stolen by another worker, this waits for `work`'s jobs (run on the
+                // calling thread once `work` is done, it returns at once).
+                while !done.load(Ordering::Acquire) {
+                    if rayon::yield_now() != Some(rayon::Yield::Executed) {
+                        std::hint::spin_loop();
+                    }
+                }
+            },
+        );
+        result
+    })
+}
+
 /// A rayon pool with `threads` workers (all cores by default).
 pub fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
     build_pool(rayon::ThreadPoolBuilder::new(), threads)
@@ -51,4 +90,27 @@ fn build_pool(mut pool: rayon::ThreadPoolBuilder, threads: Option<usize>) -> Res
         pool = pool.num_threads(t);
     }
     pool.build().context("starting the thread pool")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rayon::prelude::*;
+
+    #[test]
+    fn a_spinning_install_gives_the_work_s_result_and_ends_when_the_work_panics() {
+        let pool = thread_pool(Some(2)).expect("a pool");
+        for _ in 0..50 {
+            let sum = install_spinning(&pool, || {
+                (0..10_000u32).into_par_iter().with_max_len(100).map(u64::from).sum::<u64>()
+            });
+            assert_eq!(sum, 49_995_000);
+        }
+        // The spinner stops also when the work panics (else this would never return).
+        let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            install_spinning(&pool, || -> u64 { panic!("a failing step") })
+        }));
+        assert!(outcome.is_err());
+        assert_eq!(install_spinning(&pool, || 7), 7, "the pool still works");
+    }
 }

@@ -1,6 +1,6 @@
 //! `mrsmap odometry`: frame-to-frame odometry over a TUM RGB-D dataset.
 
-use super::dataset::{initial_pose, thread_pool};
+use super::dataset::{initial_pose, install_spinning, thread_pool};
 use super::interrupt::{Interrupted, Stop};
 use super::report::{both_written, percentile, progress_bar, write_bytes_or_rescue, write_or_rescue};
 use crate::eval::{ErrorStats, associate, rpe_translation};
@@ -168,13 +168,13 @@ pub fn run(job: &OdometryJob) -> Result<OdometrySummary> {
             }
         };
         let t0 = Instant::now();
-        let built = pool.install(|| odometry.build(&frame));
+        let built = install_spinning(&pool, || odometry.build(&frame));
         let t1 = Instant::now();
         if let Err(e) = built {
             rec.skip(&bar, entry.depth_stamp_ns, &e);
             continue;
         }
-        let outcome = pool.install(|| odometry.track());
+        let outcome = install_spinning(&pool, || odometry.track());
         let t2 = Instant::now();
         let ms = ((t1 - t0).as_secs_f64() * 1e3, (t2 - t1).as_secs_f64() * 1e3);
         rec.frame(&bar, entry.depth_stamp_ns, ms, outcome, odometry.world_from_camera());

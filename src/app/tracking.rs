@@ -94,10 +94,26 @@ impl StepOutput {
     }
 }
 
+/// How frames reach the tracker's step; it decides how the pool's workers wait for work.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Pace {
+    /// A camera: the step idles between frames (their workers sleep).
+    Live,
+    /// Recorded frames, one right after another (the other worker spins through the
+    /// step: [`super::dataset::install_spinning`]).
+    BackToBack,
+}
+
 /// The tracker's two stages for every object on `frame`, timed (paper §5.2). Runs the
 /// parallel work inside `pool` (so that rayon allocates nothing) and allocates nothing.
-pub fn track_frame(tracker: &mut Tracker, pool: &rayon::ThreadPool, frame: &RgbdFrame, out: &mut StepOutput) {
-    pool.install(|| {
+pub fn track_frame(
+    tracker: &mut Tracker,
+    pool: &rayon::ThreadPool,
+    frame: &RgbdFrame,
+    out: &mut StepOutput,
+    pace: Pace,
+) {
+    let step = || {
         for k in 0..tracker.len() {
             let t0 = Instant::now();
             let built = tracker.build_scene(k, frame);
@@ -109,7 +125,11 @@ pub fn track_frame(tracker: &mut Tracker, pool: &rayon::ThreadPool, frame: &Rgbd
             out.build_ms[k] = (t1 - t0).as_secs_f32() * 1e3;
             out.register_ms[k] = t1.elapsed().as_secs_f32() * 1e3;
         }
-    });
+    };
+    match pace {
+        Pace::Live => pool.install(step),
+        Pace::BackToBack => super::dataset::install_spinning(pool, step),
+    }
 }
 
 /// Marks every object's estimate for an unusable frame.
