@@ -277,9 +277,9 @@ pub fn tracking_ms(
     half: bool,
     gap: std::time::Duration,
 ) -> Result<TrackingTimes> {
-    use super::tracking::{LoadedTracker, Pace, StepOutput, load_tracker, track_frame};
-    // Frames after an idle gap are paced as a camera's.
-    let pace = if gap.is_zero() { Pace::BackToBack } else { Pace::Live };
+    use super::tracking::{LoadedTracker, StepOutput, Workers, load_tracker, track_frame};
+    // Frames after an idle gap are tracked as the live tracker tracks them.
+    let workers = if gap.is_zero() { Workers::Spin } else { Workers::Sleep };
     let camera = read_camera(&job.camera)?;
     let dataset = TumDataset::open(&job.dataset).with_context(|| format!("opening {}", job.dataset.display()))?;
     let mut loader = FrameLoader::new(camera, half);
@@ -319,7 +319,7 @@ pub fn tracking_ms(
                 if !gap.is_zero() {
                     std::thread::sleep(gap);
                 }
-                track_frame(tracker, &pool, &frame, &mut out, pace);
+                track_frame(tracker, &pool, &frame, &mut out, workers);
                 ms.push((f64::from(out.build_ms[0]), f64::from(out.register_ms[0])));
             }
         }

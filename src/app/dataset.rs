@@ -36,11 +36,12 @@ pub fn initial_pose(dataset: &TumDataset, stamp_ns: u64, notes: &mut String) -> 
 /// Runs `work` inside `pool`, one more worker spinning until it is done: taking the
 /// jobs `work` shares out as soon as they appear, instead of falling asleep between
 /// them and being woken for the next (tens of microseconds each on a virtual machine).
-/// For frames processed back to back (replay, offline tracking, odometry over a
-/// dataset): there it made the tracker's step 4–6 % faster (`docs/benchmarks.md`, "Two
-/// cores, one job per piece"). Not for the live tracker: after the camera's idle gap
-/// between frames a spinning worker slowed the step by half instead (the host seems to
-/// give both virtual cores one physical core then). The results do not depend on it.
+/// For frames processed back to back with nothing else running (offline tracking,
+/// odometry over a dataset): there it made the step 2–5 % faster (`docs/benchmarks.md`,
+/// "Two cores, one job per piece"). Not for the live tracker: after the camera's idle
+/// gap between frames a spinning worker slowed the step by half instead (the host seems
+/// to give both virtual cores one physical core then). Nor for the replay, whose reader
+/// thread needs the cores' spare time. The results do not depend on it.
 pub fn install_spinning<R: Send>(pool: &rayon::ThreadPool, work: impl FnOnce() -> R + Send) -> R {
     use std::sync::atomic::{AtomicBool, Ordering};
     /// Sets the flag when dropped: also when `work` panics, or the spinner would wait

@@ -11,7 +11,7 @@
 //! flag for failures are reported per threshold.
 
 use super::dataset::thread_pool;
-use super::tracking::{LoadedTracker, Pace, StepOutput, load_tracker, track_frame};
+use super::tracking::{LoadedTracker, StepOutput, Workers, load_tracker, track_frame};
 use crate::eval::align_rigid;
 use crate::geometry::Pose;
 use crate::geometry::se3::left_increment;
@@ -93,7 +93,7 @@ pub fn run(config: &TrackerConfig, job: &QualityJob) -> Result<Vec<Trial>> {
     let mut truths = Vec::new();
     for entry in &frames {
         let frame = loader.load(entry)?;
-        track_frame(&mut tracker, &pool, &frame, &mut out, Pace::BackToBack);
+        track_frame(&mut tracker, &pool, &frame, &mut out, Workers::Spin);
         let g = gt.interpolate(entry.depth_stamp_ns as f64 * 1e-9, 0.05);
         if let (TrackingStatus::Tracking, Some(g)) = (out.estimates[0].status, g) {
             estimates.push((entry.clone(), out.estimates[0].camera_from_object.inverse()));
@@ -123,7 +123,7 @@ pub fn run(config: &TrackerConfig, job: &QualityJob) -> Result<Vec<Trial>> {
             });
             let prior = left_increment(&d) * truth;
             tracker.reinitialise(0, &prior.inverse());
-            track_frame(&mut tracker, &pool, &frame, &mut out, Pace::BackToBack);
+            track_frame(&mut tracker, &pool, &frame, &mut out, Workers::Spin);
             let e = &out.estimates[0];
             let (mm, deg) = error(&e.camera_from_object.inverse(), &truth);
             let failed = e.quality <= 0.0 || mm > job.fail_mm || deg > job.fail_deg;

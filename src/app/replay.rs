@@ -6,7 +6,7 @@ use super::interrupt::{Interrupted, Stop};
 use super::poses_client::{object_trajectory_header, object_trajectory_path};
 use super::read_ahead::ReadAhead;
 use super::report::{both_written, percentile, progress_bar, write_or_rescue};
-use super::tracking::{Pace, StepOutput, load_models, track_frame, tracker_for};
+use super::tracking::{StepOutput, Workers, load_models, track_frame, tracker_for};
 use crate::geometry::{CameraModel, Pose};
 use crate::io::mcap_source::ReadMode;
 use crate::io::mcap_write::{McapFile, ObjectPoseRecord, PoseChannels};
@@ -214,7 +214,7 @@ impl Replay {
                     self.tracker.insert(tracker_for(config, models, frame.width(), frame.height())?)
                 }
             };
-            track_frame(tracker, pool, &frame, &mut self.out, Pace::BackToBack);
+            track_frame(tracker, pool, &frame, &mut self.out, Workers::Sleep);
             self.first_tracked.get_or_insert_with(Instant::now);
             self.frames += 1;
             records.clear();

@@ -5,7 +5,7 @@ use super::dataset::thread_pool;
 use super::interrupt::{Interrupted, Stop};
 use super::poses_client::{object_trajectory_header, object_trajectory_path};
 use super::report::{both_written, percentile, progress_bar, write_or_rescue};
-use super::tracking::{LoadedTracker, Pace, StepOutput, invalid_frame, load_tracker, track_frame};
+use super::tracking::{LoadedTracker, StepOutput, Workers, invalid_frame, load_tracker, track_frame};
 use crate::eval::{ErrorStats, align_rigid};
 use crate::geometry::Pose;
 use crate::io::camera_file::read_camera;
@@ -108,7 +108,7 @@ pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<TrackDataset
         }
         bar.inc(1);
         match loader.load(entry) {
-            Ok(frame) => track_frame(&mut tracker, &pool, &frame, &mut out, Pace::BackToBack),
+            Ok(frame) => track_frame(&mut tracker, &pool, &frame, &mut out, Workers::Spin),
             Err(e) => {
                 bar.suspend(|| eprintln!("warning: frame {}: {e}", format_stamp(entry.depth_stamp_ns)));
                 invalid_frame(&tracker, entry.depth_stamp_ns, &mut out);

@@ -10,7 +10,7 @@
 
 use super::recorder::{RecordOptions, RecordStats, Recorder};
 use super::report::{log_line, percentile};
-use super::tracking::{Pace, StepOutput, invalid_frame, load_tracker, pose_message, track_frame};
+use super::tracking::{StepOutput, Workers, invalid_frame, load_tracker, pose_message, track_frame};
 use crate::io::ipc::{self, FrameSize, Ipc, IpcError, now_ns};
 use crate::io::tracker_config::TrackerConfig;
 use crate::io::wire::{ObjectPose, RgbdFrameQvga, RgbdFrameVga, WireFrame};
@@ -251,7 +251,7 @@ impl<F: WireFrame> Core<F> {
         self.last_sequence = Some(header.sequence);
         let invalid = match message.frame() {
             Ok(frame) => {
-                track_frame(&mut self.tracker, &self.pool, &frame, &mut self.out, Pace::Live);
+                track_frame(&mut self.tracker, &self.pool, &frame, &mut self.out, Workers::Sleep);
                 false
             }
             Err(e) => {

@@ -94,14 +94,16 @@ impl StepOutput {
     }
 }
 
-/// How frames reach the tracker's step; it decides how the pool's workers wait for work.
+/// How the pool's other workers wait for the jobs of the tracker's step.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Pace {
-    /// A camera: the step idles between frames (their workers sleep).
-    Live,
-    /// Recorded frames, one right after another (the other worker spins through the
-    /// step: [`super::dataset::install_spinning`]).
-    BackToBack,
+pub enum Workers {
+    /// Sleep between jobs and be woken for the next: the live tracker (after the
+    /// camera's idle gap a spinning worker slowed the step) and the replay (whose reader
+    /// thread decodes the next frames on the same cores).
+    Sleep,
+    /// Spin through the step ([`super::dataset::install_spinning`]): frames processed
+    /// back to back with nothing else running beside them.
+    Spin,
 }
 
 /// The tracker's two stages for every object on `frame`, timed (paper §5.2). Runs the
@@ -111,7 +113,7 @@ pub fn track_frame(
     pool: &rayon::ThreadPool,
     frame: &RgbdFrame,
     out: &mut StepOutput,
-    pace: Pace,
+    workers: Workers,
 ) {
     let step = || {
         for k in 0..tracker.len() {
@@ -126,9 +128,9 @@ pub fn track_frame(
             out.register_ms[k] = t1.elapsed().as_secs_f32() * 1e3;
         }
     };
-    match pace {
-        Pace::Live => pool.install(step),
-        Pace::BackToBack => super::dataset::install_spinning(pool, step),
+    match workers {
+        Workers::Sleep => pool.install(step),
+        Workers::Spin => super::dataset::install_spinning(pool, step),
     }
 }
 
