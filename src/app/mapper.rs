@@ -1,6 +1,6 @@
 //! `mrsmap map`: key-view SLAM over a TUM RGB-D dataset, fused into a model file.
 
-use super::dataset::{initial_pose, thread_pool};
+use super::dataset::{initial_pose, install_spinning, thread_pool};
 use super::interrupt::{Interrupted, Stop};
 use super::report::{both_written, percentile, progress_bar, write_or_rescue};
 use crate::eval::{ErrorStats, align_poses, associate, ate_translation};
@@ -274,18 +274,18 @@ fn process_frames(
             }
         };
         let t0 = Instant::now();
-        if let Err(e) = pool.install(|| slam.build(&frame)) {
+        if let Err(e) = install_spinning(pool, || slam.build(&frame)) {
             bar.suspend(|| eprintln!("warning: skipping frame {stamp}: {e}"));
             let _ = writeln!(out.notes, "skipped {stamp}: {e}");
             out.skipped += 1;
             continue;
         }
         let t1 = Instant::now();
-        let status = pool.install(|| slam.track(&frame));
+        let status = install_spinning(pool, || slam.track(&frame));
         let t2 = Instant::now();
         slam.update_key_views(&frame);
         let t3 = Instant::now();
-        let outcome = pool.install(|| slam.close_loop());
+        let outcome = install_spinning(pool, || slam.close_loop());
         let t4 = Instant::now();
         let graph_error = slam.optimize_step();
         let t5 = Instant::now();
