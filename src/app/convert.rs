@@ -88,7 +88,7 @@ pub fn run(job: &ConvertJob) -> Result<ConvertSummary> {
     }
     // Written next to the target and renamed at the end: a failed run leaves no half
     // file; an interrupted one a finished file of the frames so far.
-    let partial = job.out.with_extension("mcap.partial");
+    let partial = crate::io::atomic::partial_path(&job.out);
     let mut file =
         McapFile::create(&partial, job.compression).with_context(|| format!("creating {}", partial.display()))?;
     // A write that fails (a full disk) removes the partial file: it is derived from the

@@ -86,7 +86,7 @@ impl Recorder {
         if options.last_seconds.is_some_and(|s| !(s.is_finite() && s > 0.0)) {
             return Err(anyhow!("--record-last must be a positive number of seconds"));
         }
-        let partial = options.path.with_extension("mcap.partial");
+        let partial = crate::io::atomic::partial_path(&options.path);
         let mut file = McapFile::create(&partial, mcap::Compression::Lz4)
             .with_context(|| format!("creating the recording {}", partial.display()))?;
         let t = RecordingTopics::default();

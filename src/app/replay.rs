@@ -96,7 +96,7 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
     let names: Vec<String> = config.objects.iter().map(|o| o.name.clone()).collect();
     // Written next to the target and renamed when finished, also after an error, so
     // the poses computed before it are kept.
-    let partial = job.out.as_ref().map(|o| o.with_extension("mcap.partial"));
+    let partial = job.out.as_deref().map(crate::io::atomic::partial_path);
     let mut output = match &partial {
         Some(p) => {
             let mut file =
