@@ -14,7 +14,7 @@ use crate::model::{FORMAT_VERSION, Model, ModelHeader, ModelSource, RootStats, s
 use crate::slam::{EdgeKind, Fused, LoopOutcome, Slam, SlamCounters, SlamParams, TrackStatus};
 use anyhow::{Context, Result, bail};
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 /// What to run.
@@ -177,22 +177,8 @@ pub fn run(job: &MapJob) -> Result<MapSummary> {
         warnings,
         interrupted: done.interrupted,
     };
-    let model_written = match &job.out {
-        Some(out) => {
-            let written = trajectory_written.is_ok() && job.trajectory.is_some();
-            write_model(
-                job,
-                out,
-                &mut slam,
-                object.as_ref(),
-                (&trajectory, written),
-                done.interrupted,
-                &pool,
-                &mut summary,
-            )
-        }
-        None => Ok(()),
-    };
+    let written = trajectory_written.is_ok() && job.trajectory.is_some();
+    let model_written = write_model(job, &mut slam, object.as_ref(), (&trajectory, written), &pool, &mut summary);
     // Both said when both failed (each may have been rescued into the temporary folder).
     both_written(model_written, trajectory_written)?;
     Ok(summary)
@@ -200,18 +186,16 @@ pub fn run(job: &MapJob) -> Result<MapSummary> {
 
 /// Fuses the key views into the model and writes it to `out` (beside it, if an
 /// interrupted run would replace a model), rescued into the temporary folder if that
-/// fails.
-#[allow(clippy::too_many_arguments)]
+/// fails. Nothing without `--out`.
 fn write_model(
     job: &MapJob,
-    out: &Path,
     slam: &mut Slam,
     object: Option<&ObjectSpec>,
     (trajectory, trajectory_written): (&[(u64, Pose)], bool),
-    interrupted: Option<Interrupted>,
     pool: &rayon::ThreadPool,
     summary: &mut MapSummary,
 ) -> Result<()> {
+    let Some(out) = job.out.as_deref() else { return Ok(()) };
     let t = Instant::now();
     let fused = pool.install(|| slam.fuse(object.map(|o| &o.volume))).with_context(|| {
         if trajectory_written {
@@ -233,7 +217,7 @@ fn write_model(
     summary.model_surfels = fused.map.usable_surfels_per_level().iter().copied().take(fused.map.num_levels()).collect();
     let model = Model { header, map: fused.map };
     // An interrupted run never replaces a model that exists (even with --force).
-    let path = match interrupted {
+    let path = match summary.interrupted {
         Some(_) if out.exists() => out.with_extension("interrupted.mrsm"),
         _ => out.to_path_buf(),
     };

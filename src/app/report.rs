@@ -100,16 +100,36 @@ pub fn write_bytes_or_rescue(path: &std::path::Path, bytes: &[u8]) -> anyhow::Re
 pub fn both_written(first: anyhow::Result<()>, second: anyhow::Result<()>) -> anyhow::Result<()> {
     match (first, second) {
         (Err(a), Err(b)) => {
-            // `a` may itself hold two (or more) failures and their cause: said once.
-            const CAUSE: &str = "\n  caused by: ";
-            let (said, cause) = (a.to_string(), a.root_cause().to_string());
-            let said = said.split(CAUSE).next().unwrap_or_default();
-            let cause = cause.rsplit(CAUSE).next().unwrap_or_default();
-            Err(anyhow::anyhow!("{said}\nand {b}{CAUSE}{cause}"))
+            // `a` may itself hold two (or more) failures: `b` joins them.
+            let mut failed = a.downcast::<OutputsFailed>().unwrap_or_else(|a| OutputsFailed(vec![a]));
+            failed.0.push(b);
+            Err(failed.into())
         }
         (a, b) => a.and(b),
     }
 }
+
+/// Outputs that could not be written, in the order they were tried: each one's message,
+/// then the first one's root cause (said once: a full disk fails them all alike).
+#[derive(Debug)]
+struct OutputsFailed(Vec<anyhow::Error>);
+
+impl std::fmt::Display for OutputsFailed {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        for (k, e) in self.0.iter().enumerate() {
+            write!(f, "{}{e}", if k == 0 { "" } else { "\nand " })?;
+        }
+        if let Some(first) = self.0.first() {
+            let cause = first.root_cause().to_string();
+            if cause != first.to_string() {
+                write!(f, "\n  caused by: {cause}")?;
+            }
+        }
+        Ok(())
+    }
+}
+
+impl std::error::Error for OutputsFailed {}
 
 #[cfg(test)]
 mod tests {
@@ -138,7 +158,7 @@ mod tests {
         assert_eq!(both_written(fail("a"), Ok(())).expect_err("a failed").to_string(), "could not write a");
         assert_eq!(both_written(Ok(()), fail("b")).expect_err("b failed").to_string(), "could not write b");
         let both = both_written(fail("a"), fail("b")).expect_err("both failed").to_string();
-        assert!(both.starts_with("could not write a\nand could not write b"), "{both}");
+        assert_eq!(both, "could not write a\nand could not write b");
         // Three, with the first's cause said once, at the end.
         let io = std::io::Error::other("No space left on device");
         let a = Err(anyhow::Error::from(io).context("could not write a"));
