@@ -40,8 +40,9 @@ pub fn initial_pose(dataset: &TumDataset, stamp_ns: u64, notes: &mut String) -> 
 /// odometry and mapping over a dataset): there it made the step 2–5 % faster (`docs/benchmarks.md`,
 /// "Two cores, one job per piece"). Not for the live tracker: after the camera's idle
 /// gap between frames a spinning worker slowed the step by half instead (the host seems
-/// to give both virtual cores one physical core then). Nor for the replay, whose reader
-/// thread needs the cores' spare time. The results do not depend on it.
+/// to give both virtual cores one physical core then). The replay runs it beside the
+/// read of its next frame (`app::read_ahead`): the worker that reads joins the step
+/// when it is done. The results do not depend on it.
 pub fn install_spinning<R: Send>(pool: &rayon::ThreadPool, work: impl FnOnce() -> R + Send) -> R {
     use std::sync::atomic::{AtomicBool, Ordering};
     /// Sets the flag when dropped: also when `work` panics, or the spinner would wait

@@ -4,12 +4,14 @@
 use super::dataset::thread_pool;
 use super::interrupt::{Interrupted, Stop};
 use super::poses_client::{object_trajectory_header, object_trajectory_path};
-use super::read_ahead::ReadAhead;
+use super::read_ahead::read_frame;
 use super::report::{both_written, percentile, progress_bar, write_or_rescue};
 use super::tracking::{StepOutput, Workers, load_models, track_frame, tracker_for};
+use crate::frame::OwnedFrame;
 use crate::geometry::{CameraModel, Pose};
 use crate::io::mcap_source::ReadMode;
 use crate::io::mcap_write::{McapFile, ObjectPoseRecord, PoseChannels};
+use crate::io::recording::RecordingError;
 use crate::io::recording::{Damage, RecordingReader, RecordingStats, RecordingTopics};
 use crate::io::tracker_config::TrackerConfig;
 use crate::io::tum::write_trajectory;
@@ -87,12 +89,13 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
         }
     }
     let started = Instant::now();
-    let reader = RecordingReader::open(&job.input, job.topics.clone(), job.camera)?;
+    let mut reader = RecordingReader::open(&job.input, job.topics.clone(), job.camera)?;
     let depth_count = reader.depth_count();
-    let mut frames = ReadAhead::start(reader, job.qvga).context("starting the reader thread")?;
     let pool = thread_pool(config.threads)?;
-    // While the reader thread reads the first frame (which sizes the tracker).
-    let models = pool.install(|| load_models(config))?.objects;
+    // The first frame (which sizes the tracker) is read while the models load.
+    let (models, first) = pool
+        .install(|| rayon::join(|| load_models(config), || read_frame(&mut reader, job.qvga, OwnedFrame::default())));
+    let models = models?.objects;
     let names: Vec<String> = config.objects.iter().map(|o| o.name.clone()).collect();
     // Written next to the target and renamed when finished, also after an error, so
     // the poses computed before it are kept.
@@ -118,12 +121,11 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
         interrupted: None,
     };
     let bar = progress_bar(depth_count.unwrap_or(0), "replaying");
-    let result = state.replay(config, job, &mut frames, &pool, &names, output.as_mut(), &bar);
+    let result = state.replay(config, job, (&mut reader, first), &pool, &names, output.as_mut(), &bar);
     if let Some(i) = &mut state.interrupted {
         i.of = depth_count.map(|n| n as usize);
     }
     bar.finish_and_clear();
-    let reader = frames.finish().context("the reader thread failed")?;
     // Every output is tried whatever became of the others (a full disk): the poses
     // tracked so far reach the trajectories even when the MCAP output failed.
     let mut written = result;
@@ -178,7 +180,7 @@ impl Replay {
         &mut self,
         config: &TrackerConfig,
         job: &ReplayJob,
-        frames: &mut ReadAhead,
+        (reader, first): (&mut RecordingReader, Result<Option<OwnedFrame>, RecordingError>),
         pool: &rayon::ThreadPool,
         names: &[String],
         mut output: Option<&mut (McapFile, PoseChannels)>,
@@ -186,24 +188,19 @@ impl Replay {
     ) -> Result<()> {
         let mut index = 0usize;
         let mut records = Vec::with_capacity(names.len());
-        while let Some(owned) = frames.next_frame() {
-            let owned = owned?;
+        let (mut next, mut spare) = (first, OwnedFrame::default());
+        while let Some(owned) = next? {
             self.interrupted = job.stop.before_frame(index, None);
             if self.interrupted.is_some() {
-                frames.give_back(owned);
                 break;
             }
             bar.inc(1);
             index += 1;
-            if !(index - 1).is_multiple_of(job.every) {
-                frames.give_back(owned);
-                continue;
-            }
-            if job.max_frames.is_some_and(|m| self.frames >= m) {
+            if job.max_frames.is_some_and(|m| self.frames >= m) && (index - 1).is_multiple_of(job.every) {
                 break;
             }
-            let Some(frame) = owned.view() else {
-                frames.give_back(owned);
+            let Some(frame) = owned.view().filter(|_| (index - 1).is_multiple_of(job.every)) else {
+                next = read_frame(reader, job.qvga, owned);
                 continue;
             };
             let tracker = match &mut self.tracker {
@@ -214,7 +211,15 @@ impl Replay {
                     self.tracker.insert(tracker_for(config, models, frame.width(), frame.height())?)
                 }
             };
-            track_frame(tracker, pool, &frame, &mut self.out, Workers::Sleep);
+            // The next frame is read and decoded beside the step, on the same workers.
+            let out = &mut self.out;
+            let spare_buffers = std::mem::take(&mut spare);
+            let ((), following) = pool.install(|| {
+                rayon::join(
+                    || track_frame(tracker, pool, &frame, out, Workers::Spin),
+                    || read_frame(reader, job.qvga, spare_buffers),
+                )
+            });
             self.first_tracked.get_or_insert_with(Instant::now);
             self.frames += 1;
             records.clear();
@@ -237,7 +242,8 @@ impl Replay {
             if let Some((file, channels)) = output.as_deref_mut() {
                 channels.write(file, frame.stamp_ns, &records)?;
             }
-            frames.give_back(owned);
+            spare = owned;
+            next = following;
         }
         Ok(())
     }

@@ -98,11 +98,11 @@ impl StepOutput {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Workers {
     /// Sleep between jobs and be woken for the next: the live tracker (after the
-    /// camera's idle gap a spinning worker slowed the step) and the replay (whose reader
-    /// thread decodes the next frames on the same cores).
+    /// camera's idle gap a spinning worker slowed the step).
     Sleep,
     /// Spin through the step ([`super::dataset::install_spinning`]): frames processed
-    /// back to back with nothing else running beside them.
+    /// back to back (the replay reads the next frame beside the step, as a job of the
+    /// same pool).
     Spin,
 }
 
