@@ -7,7 +7,7 @@ use super::poses_client::{object_trajectory_header, object_trajectory_path};
 use super::read_ahead::read_frame;
 use super::report::{both_written, percentile, progress_bar, write_or_rescue};
 use super::tracking::{StepOutput, Workers, load_models, track_frame, tracker_for};
-use crate::frame::OwnedFrame;
+use crate::frame::{OwnedFrame, RayTable};
 use crate::geometry::{CameraModel, Pose};
 use crate::io::mcap_source::ReadMode;
 use crate::io::mcap_write::{McapFile, ObjectPoseRecord, PoseChannels};
@@ -92,9 +92,21 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
     let mut reader = RecordingReader::open(&job.input, job.topics.clone(), job.camera)?;
     let depth_count = reader.depth_count();
     let pool = thread_pool(config.threads)?;
-    // The first frame (which sizes the tracker) is read while the models load.
-    let (models, first) = pool
-        .install(|| rayon::join(|| load_models(config), || read_frame(&mut reader, job.qvga, OwnedFrame::default())));
+    // The first frame (which sizes the tracker) is read, and its camera's rays computed,
+    // while the models load.
+    let (models, (first, rays)) = pool.install(|| {
+        rayon::join(
+            || load_models(config),
+            || {
+                let first = read_frame(&mut reader, job.qvga, OwnedFrame::default());
+                let rays = first.as_ref().ok().and_then(|f| f.as_ref()?.camera).and_then(|camera| {
+                    let mut rays = RayTable::with_capacity(camera.width as usize * camera.height as usize);
+                    rays.ensure(&camera).ok().map(|()| rays)
+                });
+                (first, rays)
+            },
+        )
+    });
     let models = models?.objects;
     let names: Vec<String> = config.objects.iter().map(|o| o.name.clone()).collect();
     // Written next to the target and renamed when finished, also after an error, so
@@ -111,6 +123,7 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
     };
     let mut state = Replay {
         models,
+        rays,
         tracker: None,
         out: StepOutput::new(names.len()),
         statuses: vec![[0; 4]; names.len()],
@@ -163,6 +176,8 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
 struct Replay {
     /// The loaded models, moved into the tracker when the first frame sizes it.
     models: Vec<ObjectModel>,
+    /// The first frame's rays, computed while the models loaded; moved into the tracker.
+    rays: Option<RayTable>,
     tracker: Option<Tracker>,
     out: StepOutput,
     statuses: Vec<[usize; 4]>,
@@ -208,7 +223,11 @@ impl Replay {
                 // Sized by the first frame: the recording's resolution.
                 None => {
                     let models = std::mem::take(&mut self.models);
-                    self.tracker.insert(tracker_for(config, models, frame.width(), frame.height())?)
+                    let tracker = self.tracker.insert(tracker_for(config, models, frame.width(), frame.height())?);
+                    if let Some(rays) = self.rays.take() {
+                        tracker.adopt_rays(rays);
+                    }
+                    tracker
                 }
             };
             // The next frame is read and decoded beside the step, on the same workers.

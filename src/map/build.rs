@@ -109,6 +109,13 @@ impl MapBuilder {
         }
     }
 
+    /// Takes a ray table prepared elsewhere (at start-up, beside other work): frames of
+    /// its camera then use it as it is. (A frame of another camera recomputes it as
+    /// always; one larger than the table's image allocates.)
+    pub fn adopt_rays(&mut self, rays: RayTable) {
+        self.rays = rays;
+    }
+
     /// Builds `map` from `frame`, replacing its content. Allocates nothing once the
     /// builder has seen a frame of this camera.
     pub fn build(&mut self, frame: &RgbdFrame, map: &mut SurfelMap) -> Result<BuildReport, MapError> {
@@ -328,6 +335,32 @@ mod tests {
         let points = |map: &SurfelMap| map.surfels().iter().filter(|s| s.level == 0).map(|s| s.count).sum::<f32>();
         assert_eq!(points(&margin), points(&expected));
         assert_ne!(surfels(&margin), surfels(&expected), "the region's edges are borders: the margin moves them");
+    }
+
+    /// An adopted ray table serves frames of its camera as computed there; a frame of
+    /// another camera recomputes it: the map is the one a fresh builder makes.
+    #[test]
+    fn an_adopted_ray_table_gives_the_same_map() {
+        let camera = camera(160, 120);
+        let (rgb, depth) = wall(&camera);
+        let frame = RgbdFrame::new(0, camera, &rgb, &depth).expect("consistent frame");
+        let capacity = MapCapacity::for_image(160 * 120);
+        let build = |adopted: Option<&CameraModel>| {
+            let mut builder = MapBuilder::new(160, 120, capacity.surfels);
+            if let Some(c) = adopted {
+                let mut rays = RayTable::with_capacity(160 * 120);
+                rays.ensure(c).expect("a valid camera");
+                builder.adopt_rays(rays);
+            }
+            let mut map = SurfelMap::new(MapParams::default(), capacity).expect("valid parameters");
+            builder.build(&frame, &mut map).expect("builds");
+            map.surfels().iter().map(|s| (s.node, s.dir, s.mean, s.count)).collect::<Vec<_>>()
+        };
+        let fresh = build(None);
+        assert!(!fresh.is_empty());
+        assert_eq!(build(Some(&camera)), fresh);
+        let other = CameraModel { intrinsics: PinholeIntrinsics { fx: 150.0, ..camera.intrinsics }, ..camera };
+        assert_eq!(build(Some(&other)), fresh);
     }
 
     #[test]

@@ -100,6 +100,12 @@ impl Tracker {
         Ok(Tracker { params, builder: MapBuilder::new(max_width, max_height, capacity.surfels), objects, names })
     }
 
+    /// Takes the ray table of the camera the frames will come from, computed beside other
+    /// start-up work ([`MapBuilder::adopt_rays`]): the first frame then skips it.
+    pub fn adopt_rays(&mut self, rays: crate::frame::RayTable) {
+        self.builder.adopt_rays(rays);
+    }
+
     /// Number of objects.
     pub fn len(&self) -> usize {
         self.objects.len()
