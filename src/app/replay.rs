@@ -11,8 +11,7 @@ use crate::frame::{OwnedFrame, RayTable};
 use crate::geometry::{CameraModel, Pose};
 use crate::io::mcap_source::ReadMode;
 use crate::io::mcap_write::{McapFile, ObjectPoseRecord, PoseChannels};
-use crate::io::recording::RecordingError;
-use crate::io::recording::{Damage, RecordingReader, RecordingStats, RecordingTopics};
+use crate::io::recording::{Damage, RecordingError, RecordingReader, RecordingStats, RecordingTopics};
 use crate::io::tracker_config::TrackerConfig;
 use crate::io::tum::write_trajectory;
 use crate::tracking::{ObjectModel, Tracker, TrackingStatus};
@@ -211,10 +210,11 @@ impl Replay {
             }
             bar.inc(1);
             index += 1;
-            if job.max_frames.is_some_and(|m| self.frames >= m) && (index - 1).is_multiple_of(job.every) {
+            let to_track = (index - 1).is_multiple_of(job.every);
+            if to_track && job.max_frames.is_some_and(|m| self.frames >= m) {
                 break;
             }
-            let Some(frame) = owned.view().filter(|_| (index - 1).is_multiple_of(job.every)) else {
+            let Some(frame) = owned.view().filter(|_| to_track) else {
                 next = read_frame(reader, job.qvga, owned);
                 continue;
             };
