@@ -11,8 +11,15 @@ use crate::io::recording::{RecordingError, RecordingReader};
 
 /// Reads the next frame of `reader` into `owned`'s buffers (halved with `half`: QVGA from
 /// VGA, as `--qvga` does for datasets); `Ok(None)` at the end of the recording or at its
-/// damage (the reader keeps what it found).
-pub fn read_frame(
+/// damage (the reader keeps what it found). A panic while reading (a bug) becomes an
+/// error, so that the replay still writes the poses tracked before it.
+pub fn read_frame(reader: &mut RecordingReader, half: bool, owned: OwnedFrame) -> anyhow::Result<Option<OwnedFrame>> {
+    let read = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| read_into(reader, half, owned)));
+    read.map_err(|_| anyhow::anyhow!("reading the recording failed (a bug in the reader; it panicked)"))?
+        .map_err(anyhow::Error::from)
+}
+
+fn read_into(
     reader: &mut RecordingReader,
     half: bool,
     mut owned: OwnedFrame,

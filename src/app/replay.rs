@@ -11,7 +11,7 @@ use crate::frame::{OwnedFrame, RayTable};
 use crate::geometry::{CameraModel, Pose};
 use crate::io::mcap_source::ReadMode;
 use crate::io::mcap_write::{McapFile, ObjectPoseRecord, PoseChannels};
-use crate::io::recording::{Damage, RecordingError, RecordingReader, RecordingStats, RecordingTopics};
+use crate::io::recording::{Damage, RecordingReader, RecordingStats, RecordingTopics};
 use crate::io::tracker_config::TrackerConfig;
 use crate::io::tum::write_trajectory;
 use crate::tracking::{ObjectModel, Tracker, TrackingStatus};
@@ -194,7 +194,7 @@ impl Replay {
         &mut self,
         config: &TrackerConfig,
         job: &ReplayJob,
-        (reader, first): (&mut RecordingReader, Result<Option<OwnedFrame>, RecordingError>),
+        (reader, first): (&mut RecordingReader, Result<Option<OwnedFrame>>),
         pool: &rayon::ThreadPool,
         names: &[String],
         mut output: Option<&mut (McapFile, PoseChannels)>,
