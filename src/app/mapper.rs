@@ -245,7 +245,7 @@ fn process_frames(
         }
         bar.inc(1);
         let stamp = format_stamp(entry.depth_stamp_ns);
-        let frame = match loader.load(entry) {
+        let frame = match pool.install(|| loader.load(entry)) {
             Ok(f) => f,
             Err(e) => {
                 if slam.key_views.is_empty() && matches!(e, LoadError::Image(ImageError::Size { .. })) {

@@ -157,7 +157,7 @@ pub fn run(job: &OdometryJob) -> Result<OdometrySummary> {
             break;
         }
         bar.inc(1);
-        let frame = match loader.load(entry) {
+        let frame = match pool.install(|| loader.load(entry)) {
             Ok(f) => f,
             Err(e) => {
                 if rec.summary.frames == 0 && matches!(e, LoadError::Image(ImageError::Size { .. })) {

@@ -92,7 +92,7 @@ pub fn run(config: &TrackerConfig, job: &QualityJob) -> Result<Vec<Trial>> {
     let mut estimates = Vec::new();
     let mut truths = Vec::new();
     for entry in &frames {
-        let frame = loader.load(entry)?;
+        let frame = pool.install(|| loader.load(entry))?;
         track_frame(&mut tracker, &pool, &frame, &mut out, Workers::Spin);
         let g = gt.interpolate(entry.depth_stamp_ns as f64 * 1e-9, 0.05);
         if let (TrackingStatus::Tracking, Some(g)) = (out.estimates[0].status, g) {
@@ -112,7 +112,7 @@ pub fn run(config: &TrackerConfig, job: &QualityJob) -> Result<Vec<Trial>> {
     let mut trials = Vec::new();
     for ((entry, _), g) in estimates.iter().zip(&truths) {
         let truth = world_from_object.inverse() * g;
-        let frame = loader.load(entry)?;
+        let frame = pool.install(|| loader.load(entry))?;
         for _ in 0..job.trials {
             let d = Vector6::from_fn(|k, _| {
                 if k < 3 {

@@ -107,7 +107,7 @@ pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<TrackDataset
             break;
         }
         bar.inc(1);
-        match loader.load(entry) {
+        match pool.install(|| loader.load(entry)) {
             Ok(frame) => track_frame(&mut tracker, &pool, &frame, &mut out, Workers::Spin),
             Err(e) => {
                 bar.suspend(|| eprintln!("warning: frame {}: {e}", format_stamp(entry.depth_stamp_ns)));

@@ -27,7 +27,8 @@ pub enum LoadError {
 /// Decodes dataset frames into reused buffers.
 #[derive(Debug)]
 pub struct FrameLoader {
-    png: PngReader,
+    png_rgb: PngReader,
+    png_depth: PngReader,
     camera: CameraModel,
     half: bool,
     rgb_full: Vec<u8>,
@@ -41,7 +42,8 @@ impl FrameLoader {
     /// (every other pixel) and the camera halved accordingly.
     pub fn new(camera: CameraModel, half: bool) -> Self {
         FrameLoader {
-            png: PngReader::default(),
+            png_rgb: PngReader::default(),
+            png_depth: PngReader::default(),
             camera,
             half,
             rgb_full: Vec::new(),
@@ -56,11 +58,18 @@ impl FrameLoader {
         if self.half { self.camera.halved() } else { self.camera }
     }
 
-    /// Loads one frame; the frame borrows the loader's buffers.
+    /// Loads one frame; the frame borrows the loader's buffers. The colour and the depth
+    /// image are decoded in parallel (`rayon::join`: on the caller's pool inside its
+    /// `install`, else on rayon's global pool); a colour image that fails is reported
+    /// first, as if they were read in turn.
     pub fn load(&mut self, entry: &DatasetFrame) -> Result<RgbdFrame<'_>, LoadError> {
         let size = (self.camera.width, self.camera.height);
-        self.png.read_rgb8(&entry.rgb_path, size, &mut self.rgb_full)?;
-        self.png.read_depth16(&entry.depth_path, size, &mut self.depth_full)?;
+        let (rgb, depth) = rayon::join(
+            || self.png_rgb.read_rgb8(&entry.rgb_path, size, &mut self.rgb_full),
+            || self.png_depth.read_depth16(&entry.depth_path, size, &mut self.depth_full),
+        );
+        rgb?;
+        depth?;
         if self.depth_full.iter().all(|&d| d == 0) {
             return Err(LoadError::NoValidDepth { path: entry.depth_path.clone() });
         }
@@ -93,4 +102,49 @@ pub fn halve<'a>(
         }
     }
     RgbdFrame::new(frame.stamp_ns, camera, rgb, depth)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::{NO_DISTORTION, PinholeIntrinsics};
+    use std::path::Path;
+
+    fn camera() -> CameraModel {
+        CameraModel {
+            width: 640,
+            height: 480,
+            intrinsics: PinholeIntrinsics { fx: 535.4, fy: 539.2, cx: 320.1, cy: 247.6 },
+            distortion: NO_DISTORTION,
+            depth_scale_m: 0.0002,
+        }
+    }
+
+    fn entry(rgb: &Path, depth: &Path) -> DatasetFrame {
+        DatasetFrame { rgb_stamp_ns: 1, rgb_path: rgb.into(), depth_stamp_ns: 2, depth_path: depth.into() }
+    }
+
+    /// The two images decode in parallel, yet the errors are those of reading them in
+    /// turn: the colour image's first.
+    #[test]
+    fn the_colour_image_s_error_is_said_first() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/fr3_teddy_8");
+        let first = |sub: &str| {
+            let mut files: Vec<_> =
+                std::fs::read_dir(dir.join(sub)).expect("test data").flatten().map(|e| e.path()).collect();
+            files.sort();
+            files[0].clone()
+        };
+        let (rgb, depth, missing) = (first("rgb"), first("depth"), Path::new("/no/such/image.png"));
+        let mut loader = FrameLoader::new(camera(), false);
+        let frame = loader.load(&entry(&rgb, &depth)).expect("a real frame");
+        assert_eq!((frame.width(), frame.stamp_ns), (640, 2));
+        let said = |e: LoadError| e.to_string();
+        let both = said(loader.load(&entry(missing, missing)).expect_err("both missing"));
+        assert!(both.contains("/no/such/image.png"), "{both}");
+        let swapped = said(loader.load(&entry(&depth, missing)).expect_err("a depth image as colour"));
+        assert!(swapped.contains(&depth.display().to_string()), "{swapped}");
+        let no_depth = said(loader.load(&entry(&rgb, missing)).expect_err("no depth"));
+        assert!(no_depth.contains("/no/such/image.png"), "{no_depth}");
+    }
 }
