@@ -223,6 +223,7 @@ fn zero_counts_and_empty_service_names_are_refused() {
         ),
         (vec!["poses", "--count", "0"], "--count", "at least 1"),
         (vec!["replay", "--input", "r.mcap", "--config", config, "--every", "0"], "--every", "at least 1"),
+        (vec!["replay", "--input", "r.mcap", "--config", config, "--threads", "0"], "--threads", "at least 1"),
         (vec!["map", "--dataset", "d", "--camera", "c", "--threads", "0"], "--threads", "at least 1"),
         (vec!["bench", "--dataset", "d", "--camera", "c", "--passes", "0"], "--passes", "at least 1"),
         (

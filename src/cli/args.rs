@@ -419,6 +419,10 @@ pub struct ReplayArgs {
     /// Stop after this many tracked frames.
     #[arg(long, value_parser = at_least_one::<usize>)]
     pub max_frames: Option<usize>,
+    /// Worker threads, reading the recording included [default: the config's `threads`,
+    /// else all cores]. The output is identical for any count.
+    #[arg(long, value_parser = at_least_one::<usize>)]
+    pub threads: Option<usize>,
 }
 
 #[derive(Subcommand)]

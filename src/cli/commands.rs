@@ -357,7 +357,8 @@ pub fn demo(a: DemoArgs) -> Result<()> {
 
 /// `mrsmap replay`.
 pub fn replay(a: ReplayArgs) -> Result<ExitCode> {
-    let config = mrsmap::io::tracker_config::read_tracker_config(&a.config)?;
+    let mut config = mrsmap::io::tracker_config::read_tracker_config(&a.config)?;
+    config.threads = a.threads.or(config.threads);
     let camera = a.camera.as_deref().map(mrsmap::io::camera_file::read_camera).transpose()?;
     check_outputs([("--out", a.out.as_deref()), ("--trajectory", a.trajectory.as_deref())])?;
     let job = app::replay::ReplayJob {
