@@ -107,18 +107,7 @@ pub fn halve<'a>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::{NO_DISTORTION, PinholeIntrinsics};
     use std::path::Path;
-
-    fn camera() -> CameraModel {
-        CameraModel {
-            width: 640,
-            height: 480,
-            intrinsics: PinholeIntrinsics { fx: 535.4, fy: 539.2, cx: 320.1, cy: 247.6 },
-            distortion: NO_DISTORTION,
-            depth_scale_m: 0.0002,
-        }
-    }
 
     fn entry(rgb: &Path, depth: &Path) -> DatasetFrame {
         DatasetFrame { rgb_stamp_ns: 1, rgb_path: rgb.into(), depth_stamp_ns: 2, depth_path: depth.into() }
@@ -128,7 +117,8 @@ mod tests {
     /// turn: the colour image's first.
     #[test]
     fn the_colour_image_s_error_is_said_first() {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/fr3_teddy_8");
+        let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+        let dir = root.join("tests/data/fr3_teddy_8");
         let first = |sub: &str| {
             let mut files: Vec<_> =
                 std::fs::read_dir(dir.join(sub)).expect("test data").flatten().map(|e| e.path()).collect();
@@ -136,7 +126,9 @@ mod tests {
             files[0].clone()
         };
         let (rgb, depth, missing) = (first("rgb"), first("depth"), Path::new("/no/such/image.png"));
-        let mut loader = FrameLoader::new(camera(), false);
+        let camera = crate::io::camera_file::read_camera(&root.join("robot_config/cameras/tum_fr3.toml"))
+            .expect("the shipped camera file");
+        let mut loader = FrameLoader::new(camera, false);
         let frame = loader.load(&entry(&rgb, &depth)).expect("a real frame");
         assert_eq!((frame.width(), frame.stamp_ns), (640, 2));
         let said = |e: LoadError| e.to_string();
