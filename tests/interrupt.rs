@@ -88,6 +88,7 @@ fn convert_and_replay_stopped_early_finish_their_mcap_files() {
         force: false,
         depth_encoding: mrsmap::io::mcap_write::DepthEncoding::Mm16,
         compression: mcap::Compression::Zstd,
+        chunk_bytes: mrsmap::io::mcap_write::DEFAULT_CHUNK_BYTES,
         topics: RecordingTopics::default(),
         first_frame: 0,
         max_frames: None,

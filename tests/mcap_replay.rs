@@ -9,7 +9,7 @@ use common::*;
 use mrsmap::app::convert::{ConvertJob, run as convert};
 use mrsmap::app::replay::{ReplayJob, run as replay};
 use mrsmap::io::mcap_source::ReadMode;
-use mrsmap::io::mcap_write::{DepthEncoding, FrameChannels, McapFile};
+use mrsmap::io::mcap_write::{DEFAULT_CHUNK_BYTES, DepthEncoding, FrameChannels, McapFile};
 use mrsmap::io::recording::{RecordingError, RecordingReader, RecordingTopics};
 use mrsmap::io::ros2::{CameraInfo, Header, Image, RegionOfInterest, Time};
 use mrsmap::io::tracker_config::read_tracker_config;
@@ -128,7 +128,11 @@ fn reads_ros2_compressed_images_of_the_python_writer() {
 }
 
 fn convert_clip(dir: &Path, depth_encoding: DepthEncoding) -> PathBuf {
-    let out = dir.join("teddy.mcap");
+    convert_clip_chunked(dir, depth_encoding, DEFAULT_CHUNK_BYTES, "teddy.mcap")
+}
+
+fn convert_clip_chunked(dir: &Path, depth_encoding: DepthEncoding, chunk_bytes: u64, name: &str) -> PathBuf {
+    let out = dir.join(name);
     let job = ConvertJob {
         dataset: teddy_clip(),
         camera: None,
@@ -136,6 +140,7 @@ fn convert_clip(dir: &Path, depth_encoding: DepthEncoding) -> PathBuf {
         force: false,
         depth_encoding,
         compression: mcap::Compression::Zstd,
+        chunk_bytes,
         topics: RecordingTopics::default(),
         first_frame: 0,
         max_frames: None,
@@ -204,6 +209,35 @@ fn replay_matches_the_dataset_run_and_is_byte_identical_at_any_thread_count() {
     assert_eq!(read(qvga_traj), read(dir.join("dataset_qvga.txt")));
 }
 
+/// The chunks of an MCAP file, from its summary.
+fn chunk_count(path: &Path) -> usize {
+    let bytes = std::fs::read(path).expect("recording");
+    mcap::Summary::read(&bytes).expect("summary").expect("indexed").chunk_indexes.len()
+}
+
+#[test]
+fn the_chunk_size_sets_the_frames_per_chunk_and_the_poses_do_not_depend_on_it() {
+    let dir = temp_dir("mcap-chunks");
+    // The default (1 MiB): a VGA frame (1.5 MB of images) fills a chunk; 4 MiB chunks (the
+    // layout of `ros2 bag record`'s `zstd_small` preset) hold two or three.
+    let small = convert_clip(&dir, DepthEncoding::Mm16);
+    let large = convert_clip_chunked(&dir, DepthEncoding::Mm16, 4 << 20, "large.mcap");
+    let (small_chunks, large_chunks) = (chunk_count(&small), chunk_count(&large));
+    assert!((8..=9).contains(&small_chunks), "{small_chunks} chunks for 8 frames at the default size");
+    assert!((3..=4).contains(&large_chunks), "{large_chunks} chunks for 8 frames of 4 MiB chunks");
+    let config = config_with_threads(&dir, 2);
+    let poses = |input: &Path, name: &str| {
+        let traj = dir.join(name);
+        let s = replay(&config, &replay_job(input, None, Some(traj.clone()))).expect("replays");
+        assert_eq!(s.objects[0].1[0], 8, "tracking on every frame");
+        let text = std::fs::read_to_string(&traj).expect("trajectory");
+        text.lines().filter(|l| !l.starts_with('#')).map(str::to_string).collect::<Vec<_>>()
+    };
+    let from_small = poses(&small, "small.txt");
+    assert_eq!(from_small.len(), 8);
+    assert_eq!(from_small, poses(&large, "large.txt"), "the same poses from either layout");
+}
+
 fn job_template(dir: &Path) -> mrsmap::app::track_dataset::TrackDatasetJob {
     mrsmap::app::track_dataset::TrackDatasetJob {
         dataset: teddy_clip(),
@@ -220,7 +254,7 @@ fn job_template(dir: &Path) -> mrsmap::app::track_dataset::TrackDatasetJob {
 
 /// Writes a recording of `frames` synthetic frames with a custom depth message.
 fn write_custom(path: &Path, with_info: bool, depth: impl Fn(&mut Vec<u8>) -> (u32, u32, &'static str)) {
-    let mut file = McapFile::create(path, mcap::Compression::Lz4).expect("create");
+    let mut file = McapFile::create(path, mcap::Compression::Lz4, DEFAULT_CHUNK_BYTES).expect("create");
     let t = RecordingTopics::default();
     let image = mrsmap::io::ros2::image_schema();
     let c = file.add_ros2_channel(&t.color, "sensor_msgs/msg/Image", &image).expect("channel");
@@ -382,7 +416,7 @@ fn a_recording_written_by_mrsmap_reads_back() {
     let plumb_bob = [0.1, -0.2, 0.001, 0.002, 0.05, 0.0, 0.0, 0.0];
     for (i, distortion) in [mrsmap::geometry::NO_DISTORTION, plumb_bob, rational].into_iter().enumerate() {
         let path = dir.join(format!("frames{i}.mcap"));
-        let mut file = McapFile::create(&path, mcap::Compression::Zstd).expect("create");
+        let mut file = McapFile::create(&path, mcap::Compression::Zstd, DEFAULT_CHUNK_BYTES).expect("create");
         let t = RecordingTopics::default();
         let channels =
             FrameChannels::add(&mut file, [&t.color, &t.depth, &t.camera_info], DepthEncoding::Mm16).expect("add");

@@ -27,6 +27,9 @@ pub struct ConvertJob {
     pub depth_encoding: DepthEncoding,
     /// Chunk compression.
     pub compression: mcap::Compression,
+    /// A chunk is closed once its records reach this many bytes, uncompressed
+    /// ([`crate::io::mcap_write::DEFAULT_CHUNK_BYTES`] by default).
+    pub chunk_bytes: u64,
     /// Topics to write.
     pub topics: RecordingTopics,
     /// Skip this many frames.
@@ -89,8 +92,8 @@ pub fn run(job: &ConvertJob) -> Result<ConvertSummary> {
     // Written next to the target and renamed at the end: a failed run leaves no half
     // file; an interrupted one a finished file of the frames so far.
     let partial = crate::io::atomic::partial_path(&job.out);
-    let mut file =
-        McapFile::create(&partial, job.compression).with_context(|| format!("creating {}", partial.display()))?;
+    let mut file = McapFile::create(&partial, job.compression, job.chunk_bytes)
+        .with_context(|| format!("creating {}", partial.display()))?;
     // A write that fails (a full disk) removes the partial file: it is derived from the
     // dataset, which is still there, and would only hold the space the write lacked.
     let converted = write_frames(job, &frames, camera, &mut file).and_then(|counts| {

@@ -14,7 +14,9 @@ use super::report::log_line;
 use super::tracking::StepOutput;
 use crate::frame::{OwnedFrame, RgbdFrame};
 use crate::geometry::Pose;
-use crate::io::mcap_write::{DepthEncoding, FrameChannels, McapFile, ObjectPoseRecord, PoseChannels};
+use crate::io::mcap_write::{
+    DEFAULT_CHUNK_BYTES, DepthEncoding, FrameChannels, McapFile, ObjectPoseRecord, PoseChannels,
+};
 use crate::io::recording::RecordingTopics;
 use crate::tracking::TrackingStatus;
 use anyhow::{Context, Result, anyhow};
@@ -87,7 +89,7 @@ impl Recorder {
             return Err(anyhow!("--record-last must be a positive number of seconds"));
         }
         let partial = crate::io::atomic::partial_path(&options.path);
-        let mut file = McapFile::create(&partial, mcap::Compression::Lz4)
+        let mut file = McapFile::create(&partial, mcap::Compression::Lz4, DEFAULT_CHUNK_BYTES)
             .with_context(|| format!("creating the recording {}", partial.display()))?;
         let t = RecordingTopics::default();
         let starting = || format!("starting the recording {}", partial.display());

@@ -10,7 +10,7 @@ use super::tracking::{StepOutput, Workers, load_models, track_frame, tracker_for
 use crate::frame::{OwnedFrame, RayTable};
 use crate::geometry::{CameraModel, Pose};
 use crate::io::mcap_source::ReadMode;
-use crate::io::mcap_write::{McapFile, ObjectPoseRecord, PoseChannels};
+use crate::io::mcap_write::{DEFAULT_CHUNK_BYTES, McapFile, ObjectPoseRecord, PoseChannels};
 use crate::io::recording::{Damage, RecordingReader, RecordingStats, RecordingTopics};
 use crate::io::tracker_config::TrackerConfig;
 use crate::io::tum::write_trajectory;
@@ -113,8 +113,8 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
     let partial = job.out.as_deref().map(crate::io::atomic::partial_path);
     let mut output = match &partial {
         Some(p) => {
-            let mut file =
-                McapFile::create(p, mcap::Compression::Zstd).with_context(|| format!("creating {}", p.display()))?;
+            let mut file = McapFile::create(p, mcap::Compression::Zstd, DEFAULT_CHUNK_BYTES)
+                .with_context(|| format!("creating {}", p.display()))?;
             let channels = PoseChannels::add(&mut file, &names)?;
             Some((file, channels))
         }

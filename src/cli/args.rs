@@ -457,6 +457,12 @@ pub struct TumToMcapArgs {
     /// Chunk compression.
     #[arg(long, default_value = "zstd", value_parser = ["zstd", "lz4"])]
     pub compression: String,
+    /// Chunk size: a chunk is closed once its messages reach this many bytes
+    /// (uncompressed). The default holds one VGA frame per chunk; `ros2 bag record -s mcap`
+    /// writes 786432 by default, its `zstd_small` preset 4194304. Readers decompress a
+    /// whole chunk at a time: small chunks spread the work evenly over the frames.
+    #[arg(long, default_value_t = mrsmap::io::mcap_write::DEFAULT_CHUNK_BYTES, value_parser = at_least_one::<u64>)]
+    pub chunk_size: u64,
     #[command(flatten)]
     pub topics: TopicArgs,
     /// Skip this many frames.

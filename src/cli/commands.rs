@@ -397,6 +397,7 @@ pub fn convert(c: ConvertCommand) -> Result<ExitCode> {
                     mrsmap::io::mcap_write::DepthEncoding::Mm16
                 },
                 compression: if a.compression == "lz4" { mcap::Compression::Lz4 } else { mcap::Compression::Zstd },
+                chunk_bytes: a.chunk_size,
                 topics: a.topics.topics(),
                 first_frame: a.first_frame,
                 max_frames: a.max_frames,

@@ -21,6 +21,16 @@ use std::fs::File;
 use std::io::BufWriter;
 use std::path::Path;
 
+/// Chunks close once their messages reach this size (uncompressed): 1 MiB, the `mcap`
+/// crate's default. A VGA frame (camera info, colour, then depth: 1.5 MB with 16UC1 depth)
+/// then closes its chunk with its depth image, so each chunk holds one whole frame. A
+/// reader decompresses a whole chunk at a time, and chunks of one frame spread decoding
+/// evenly over the frames (the replay reads beside the tracker step: docs/benchmarks.md,
+/// "MCAP replay", stop 48). `ros2 bag record -s mcap` writes 768 KiB chunks by default
+/// (a frame's colour and depth then fall in different chunks), its `zstd_small` preset
+/// 4 MiB.
+pub const DEFAULT_CHUNK_BYTES: u64 = 1 << 20;
+
 /// The optical frame images and poses are expressed in (REP 103: x right, y down, z forward).
 pub const CAMERA_FRAME_ID: &str = "camera_color_optical_frame";
 /// The Foxglove topic with every object's pose.
@@ -55,15 +65,16 @@ impl std::fmt::Debug for McapFile {
 }
 
 impl McapFile {
-    /// Creates `path` (chunked, indexed, zstd or lz4 compressed; profile `ros2`).
-    pub fn create(path: &Path, compression: Compression) -> Result<Self, McapError> {
+    /// Creates `path` (chunked, indexed, zstd or lz4 compressed; profile `ros2`): a chunk is
+    /// closed once its records reach `chunk_bytes` (uncompressed).
+    pub fn create(path: &Path, compression: Compression, chunk_bytes: u64) -> Result<Self, McapError> {
         let file = BufWriter::with_capacity(1 << 20, File::create(path)?);
         let writer = WriteOptions::new()
             .profile("ros2")
             .library(concat!("mrsmap ", env!("CARGO_PKG_VERSION")))
             .compression(Some(compression))
             .compression_threads(0)
-            .chunk_size(Some(4 << 20))
+            .chunk_size(Some(chunk_bytes))
             .create(file)?;
         Ok(McapFile { writer, sequence: 0, buffer: Vec::new() })
     }
