@@ -453,7 +453,8 @@ fn bench_runs_on_the_shipped_clip_with_or_without_the_pose_graph() {
         let out = mrsmap(&[&args[..], &["--graph-key-views", graph]].concat());
         assert!(out.status.success(), "--graph-key-views {graph}: {}", String::from_utf8_lossy(&out.stderr));
         let text = String::from_utf8_lossy(&out.stdout);
-        assert!(text.starts_with("compiled for: "), "the figures say what they were built for: {text}");
+        assert!(text.starts_with("machine: "), "the figures say which machine ran them: {text}");
+        assert!(text.contains("\ncompiled for: "), "the figures say what they were built for: {text}");
         assert!(text.contains("QVGA 320×240"), "{text}");
         assert_eq!(text.contains("pose-graph step"), graph != "0", "{text}");
     }

@@ -226,6 +226,21 @@ pub fn instruction_set() -> &'static str {
     }
 }
 
+/// The processor's name as the kernel gives it (`/proc/cpuinfo`; `None` elsewhere): the
+/// same binary runs at other speeds on another machine type, so it is printed with the
+/// figures, as is the probe loop's time.
+pub fn cpu_model() -> Option<String> {
+    cpu_model_in(&std::fs::read_to_string("/proc/cpuinfo").ok()?)
+}
+
+/// The first `model name` of a `/proc/cpuinfo` text.
+fn cpu_model_in(cpuinfo: &str) -> Option<String> {
+    cpuinfo.lines().find_map(|line| {
+        let (key, value) = line.split_once(':')?;
+        (key.trim() == "model name").then(|| value.trim().to_string()).filter(|v| !v.is_empty())
+    })
+}
+
 /// Prints results as a Markdown table.
 pub fn print(results: &[BenchResult], threads: usize) {
     println!(
@@ -338,4 +353,17 @@ pub fn tracking_ms(
         scene_ms: ms.iter().map(|m| m.0).collect(),
         register_ms: ms.iter().map(|m| m.1).collect(),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_cpu_model_is_the_first_model_name_line() {
+        let text = "processor\t: 0\nvendor_id\t: GenuineIntel\nmodel name\t: Intel(R) Xeon(R) Processor\n\nprocessor\t: 1\nmodel name\t: other\n";
+        assert_eq!(cpu_model_in(text).as_deref(), Some("Intel(R) Xeon(R) Processor"));
+        assert_eq!(cpu_model_in("processor\t: 0\nmodel name\t:   \n"), None);
+        assert_eq!(cpu_model_in(""), None);
+    }
 }

@@ -295,6 +295,9 @@ pub fn bench(a: BenchArgs) -> Result<()> {
     let tracking = a.tracking_config.as_deref().map(mrsmap::io::tracker_config::read_tracker_config).transpose()?;
     let threads = a.threads.unwrap_or_else(rayon::current_num_threads);
     let before = app::capacity::probe(threads);
+    let cpu = app::bench::cpu_model().unwrap_or_else(|| "unknown".into());
+    let cpus = std::thread::available_parallelism().map_or_else(|_| "?".into(), |n| n.to_string());
+    println!("machine: {cpu}, {cpus} logical CPUs");
     println!("compiled for: {}\n", app::bench::instruction_set());
     let results = app::bench::run(&job)?;
     app::bench::print(&results, threads);

@@ -105,8 +105,9 @@ pub enum Command {
     /// can take one). When either falls short, the times are slower than the machine
     /// can be. Record those lines with the figures.
     ///
-    /// It also prints the instruction set the binary was compiled for: a build for the
-    /// robot's own CPU (`RUSTFLAGS="-C target-cpu=native" cargo build --release`) is
+    /// It also prints the processor (the same binary runs at other speeds on another
+    /// machine type, and the loop's quiet time differs too) and the instruction set the
+    /// binary was compiled for: a build for the robot's own CPU (`RUSTFLAGS="-C target-cpu=native" cargo build --release`) is
     /// faster than the portable default, with the same trajectories bit for bit on the
     /// machines measured (docs/benchmarks.md).
     Bench(BenchArgs),
