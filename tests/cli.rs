@@ -226,6 +226,13 @@ fn zero_counts_and_empty_service_names_are_refused() {
         (vec!["replay", "--input", "r.mcap", "--config", config, "--threads", "0"], "--threads", "at least 1"),
         (vec!["map", "--dataset", "d", "--camera", "c", "--threads", "0"], "--threads", "at least 1"),
         (vec!["bench", "--dataset", "d", "--camera", "c", "--passes", "0"], "--passes", "at least 1"),
+        (vec!["convert", "tum-to-mcap", "d", "--out", "o", "--chunk-size", "0"], "--chunk-size", "at least 1"),
+        // A chunk the replay could not read back (records over 256 MiB are refused).
+        (
+            vec!["convert", "tum-to-mcap", "d", "--out", "o", "--chunk-size", "1000000000"],
+            "--chunk-size",
+            "at most 67108864",
+        ),
         (
             vec!["eval", "tracking-quality", "--config", config, "--dataset", "d", "--camera", "c", "--trials", "0"],
             "--trials",

@@ -461,7 +461,7 @@ pub struct TumToMcapArgs {
     /// (uncompressed). The default holds one VGA frame per chunk; `ros2 bag record -s mcap`
     /// writes 786432 by default, its `zstd_small` preset 4194304. Readers decompress a
     /// whole chunk at a time: small chunks spread the work evenly over the frames.
-    #[arg(long, default_value_t = mrsmap::io::mcap_write::DEFAULT_CHUNK_BYTES, value_parser = at_least_one::<u64>)]
+    #[arg(long, default_value_t = mrsmap::io::mcap_write::DEFAULT_CHUNK_BYTES, value_parser = chunk_size)]
     pub chunk_size: u64,
     #[command(flatten)]
     pub topics: TopicArgs,
@@ -484,6 +484,21 @@ where
         Ok(n) => Ok(n),
         Err(e) => Err(e.to_string()),
     }
+}
+
+/// The largest `--chunk-size`: a chunk holds up to this plus one message, well within the
+/// largest record the reader accepts (`mcap_source::MAX_RECORD_BYTES`, 256 MiB).
+const MAX_CHUNK_BYTES: u64 = 64 << 20;
+
+/// A chunk size in bytes: at least 1, and small enough that the replay reads it back.
+fn chunk_size(text: &str) -> Result<u64, String> {
+    let n = at_least_one::<u64>(text)?;
+    if n > MAX_CHUNK_BYTES {
+        return Err(format!(
+            "must be at most {MAX_CHUNK_BYTES} (64 MiB): a larger chunk could exceed the 256 MiB records `mrsmap replay` reads"
+        ));
+    }
+    Ok(n)
 }
 
 /// An iceoryx2 service name (prefix): not empty, or the driver and the tracker would
