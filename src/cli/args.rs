@@ -460,7 +460,8 @@ pub struct TumToMcapArgs {
     /// Chunk size: a chunk is closed once its messages reach this many bytes
     /// (uncompressed). The default holds one VGA frame per chunk; `ros2 bag record -s mcap`
     /// writes 786432 by default, its `zstd_small` preset 4194304. Readers decompress a
-    /// whole chunk at a time: small chunks spread the work evenly over the frames.
+    /// whole chunk at a time: small chunks spread the work evenly over the frames. At most
+    /// 67108864 (64 MiB).
     #[arg(long, default_value_t = mrsmap::io::mcap_write::DEFAULT_CHUNK_BYTES, value_parser = chunk_size)]
     pub chunk_size: u64,
     #[command(flatten)]
