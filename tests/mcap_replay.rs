@@ -131,12 +131,11 @@ fn convert_clip(dir: &Path, depth_encoding: DepthEncoding) -> PathBuf {
     convert_clip_chunked(dir, depth_encoding, DEFAULT_CHUNK_BYTES, "teddy.mcap")
 }
 
-fn convert_clip_chunked(dir: &Path, depth_encoding: DepthEncoding, chunk_bytes: u64, name: &str) -> PathBuf {
-    let out = dir.join(name);
-    let job = ConvertJob {
+fn convert_job(out: PathBuf, depth_encoding: DepthEncoding, chunk_bytes: u64) -> ConvertJob {
+    ConvertJob {
         dataset: teddy_clip(),
         camera: None,
-        out: out.clone(),
+        out,
         force: false,
         depth_encoding,
         compression: mcap::Compression::Zstd,
@@ -145,8 +144,12 @@ fn convert_clip_chunked(dir: &Path, depth_encoding: DepthEncoding, chunk_bytes: 
         first_frame: 0,
         max_frames: None,
         stop: Default::default(),
-    };
-    let s = convert(&job).expect("converts");
+    }
+}
+
+fn convert_clip_chunked(dir: &Path, depth_encoding: DepthEncoding, chunk_bytes: u64, name: &str) -> PathBuf {
+    let out = dir.join(name);
+    let s = convert(&convert_job(out.clone(), depth_encoding, chunk_bytes)).expect("converts");
     assert_eq!((s.written, s.skipped, s.interrupted), (8, 0, None));
     out
 }
@@ -223,6 +226,12 @@ fn the_chunk_size_sets_the_frames_per_chunk_and_the_poses_do_not_depend_on_it() 
     let small = convert_clip(&dir, DepthEncoding::Mm16);
     let large = convert_clip_chunked(&dir, DepthEncoding::Mm16, 4 << 20, "large.mcap");
     let (small_chunks, large_chunks) = (chunk_count(&small), chunk_count(&large));
+    // A size the replay could not read back is refused before anything is written.
+    for bad in [0, mrsmap::io::mcap_write::MAX_CHUNK_BYTES + 1] {
+        let e = convert(&convert_job(dir.join("bad.mcap"), DepthEncoding::Mm16, bad)).expect_err("refused").to_string();
+        assert!(e.contains("chunk size"), "{e}");
+        assert!(!dir.join("bad.mcap").exists());
+    }
     assert!((8..=9).contains(&small_chunks), "{small_chunks} chunks for 8 frames at the default size");
     assert!((3..=4).contains(&large_chunks), "{large_chunks} chunks for 8 frames of 4 MiB chunks");
     let config = config_with_threads(&dir, 2);

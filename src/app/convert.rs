@@ -6,7 +6,7 @@ use super::report::progress_bar;
 use crate::geometry::CameraModel;
 use crate::io::camera_file::{parse_camera, read_camera};
 use crate::io::frames::FrameLoader;
-use crate::io::mcap_write::{DepthEncoding, FrameChannels, McapFile};
+use crate::io::mcap_write::{DepthEncoding, FrameChannels, MAX_CHUNK_BYTES, McapFile};
 use crate::io::recording::RecordingTopics;
 use crate::io::tum::{DatasetFrame, TumDataset, format_stamp};
 use anyhow::{Context, Result, bail};
@@ -69,6 +69,9 @@ pub fn tum_camera_for(dataset: &Path) -> Option<CameraModel> {
 
 /// Writes the recording; returns how many frames were written and skipped (unreadable).
 pub fn run(job: &ConvertJob) -> Result<ConvertSummary> {
+    if !(1..=MAX_CHUNK_BYTES).contains(&job.chunk_bytes) {
+        bail!("chunk size {} must be 1 ..= {MAX_CHUNK_BYTES} bytes", job.chunk_bytes);
+    }
     if job.out.exists() && !job.force {
         bail!("{} exists; pass --force to replace it", job.out.display());
     }

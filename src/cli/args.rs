@@ -487,16 +487,16 @@ where
     }
 }
 
-/// The largest `--chunk-size`: a chunk holds up to this plus one message, well within the
-/// largest record the reader accepts (`mcap_source::MAX_RECORD_BYTES`, 256 MiB).
-const MAX_CHUNK_BYTES: u64 = 64 << 20;
-
-/// A chunk size in bytes: at least 1, and small enough that the replay reads it back.
+/// A chunk size in bytes: at least 1, and small enough that the replay reads it back
+/// (`mcap_write::MAX_CHUNK_BYTES`).
 fn chunk_size(text: &str) -> Result<u64, String> {
+    use mrsmap::io::{mcap_source::MAX_RECORD_BYTES, mcap_write::MAX_CHUNK_BYTES};
     let n = at_least_one::<u64>(text)?;
     if n > MAX_CHUNK_BYTES {
         return Err(format!(
-            "must be at most {MAX_CHUNK_BYTES} (64 MiB): a larger chunk could exceed the 256 MiB records `mrsmap replay` reads"
+            "must be at most {MAX_CHUNK_BYTES} ({} MiB): a larger chunk could exceed the {} MiB records `mrsmap replay` reads",
+            MAX_CHUNK_BYTES >> 20,
+            MAX_RECORD_BYTES >> 20
         ));
     }
     Ok(n)

@@ -107,9 +107,10 @@ pub enum Command {
     ///
     /// It also prints the processor (the same binary runs at other speeds on another
     /// machine type, and the loop's quiet time differs too) and the instruction set the
-    /// binary was compiled for: a build for the robot's own CPU (`RUSTFLAGS="-C target-cpu=native" cargo build --release`) is
-    /// faster than the portable default, with the same trajectories bit for bit on the
-    /// machines measured (docs/benchmarks.md).
+    /// binary was compiled for: a build for the robot's own CPU
+    /// (`RUSTFLAGS="-C target-cpu=native" cargo build --release`) is faster than the
+    /// portable default, with the same trajectories bit for bit on the machines measured
+    /// (docs/benchmarks.md).
     Bench(BenchArgs),
 }
 

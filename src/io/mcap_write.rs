@@ -31,6 +31,13 @@ use std::path::Path;
 /// 4 MiB.
 pub const DEFAULT_CHUNK_BYTES: u64 = 1 << 20;
 
+/// The largest chunk size a writer is given: a chunk holds up to this plus one message,
+/// well within the largest record the reader accepts
+/// ([`MAX_RECORD_BYTES`](super::mcap_source::MAX_RECORD_BYTES)), so the replay reads back
+/// what was written.
+pub const MAX_CHUNK_BYTES: u64 = 64 << 20;
+const _: () = assert!(2 * MAX_CHUNK_BYTES <= super::mcap_source::MAX_RECORD_BYTES as u64);
+
 /// The optical frame images and poses are expressed in (REP 103: x right, y down, z forward).
 pub const CAMERA_FRAME_ID: &str = "camera_color_optical_frame";
 /// The Foxglove topic with every object's pose.
