@@ -194,11 +194,13 @@ fn bad_paths_and_settings_are_refused_before_any_work() {
     let out = mrsmap(&["bench", "--dataset", clip, "--camera", camera, "--tracking-config", "/no/such/tracker.toml"]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("/no/such/tracker.toml") && !String::from_utf8_lossy(&out.stdout).contains("| VGA"), "{err}");
-    // A picture that cannot be written is said to be so (it was "cannot read").
+    // A picture that cannot be written is said to be so (it was "cannot read"), before
+    // the model is drawn.
     let model = root().join("models/teddy.mrsm");
     let out = mrsmap(&["model", "render", path_str(&model), "--out", "/no/such/folder/teddy.png"]);
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("cannot write /no/such/folder/teddy.png") && !err.contains("cannot read"), "{err}");
+    let said = "--out /no/such/folder/teddy.png: cannot write there: folder /no/such/folder does not exist";
+    assert!(err.contains(said) && !err.contains("cannot read"), "{err}");
     // A folder is not read as a file that lacks MCAP's magic bytes.
     let out = mrsmap(&["replay", "--input", path_str(&dir), "--config", path_str(&config), "--out", path_str(&poses)]);
     let err = String::from_utf8_lossy(&out.stderr);

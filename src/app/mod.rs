@@ -11,6 +11,7 @@ pub mod interrupt;
 pub mod mapper;
 pub mod model_cmd;
 pub mod odometry;
+pub mod outputs;
 pub mod plot;
 pub mod poses_client;
 pub mod quality_eval;

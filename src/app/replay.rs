@@ -79,11 +79,9 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
         if out.exists() && !job.force {
             bail!("{} exists; pass --force to replace it", out.display());
         }
-        // (Only paths that both exist can be the same file; a missing input is reported
-        // by the reader, naming it.)
-        if let (Ok(out), Ok(input)) = (out.canonicalize(), job.input.canonicalize())
-            && out == input
-        {
+        // (The command line checks every output against every input before; this guards
+        // the library's callers. A missing input is reported by the reader, naming it.)
+        if super::outputs::same_file(out, &job.input) {
             bail!("--out {} is the input recording", out.display());
         }
     }

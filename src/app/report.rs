@@ -1,5 +1,5 @@
-//! Small helpers for reports: percentiles, progress bars, and checks and rescue of
-//! output paths.
+//! Small helpers for reports: percentiles, progress bars, and the rescue of outputs
+//! that cannot be written at the end of a run.
 
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -35,43 +35,11 @@ pub fn log_line(args: std::fmt::Arguments) {
     let _ = writeln!(std::io::stderr().lock(), "{args}");
 }
 
-/// Checks, before a long run, that a file can be written at `path` (once the run ends):
-/// `path` is not a folder, its folder exists, and a file can be created there (one is
-/// created and removed). A run's results are then not lost at its end to a mistyped
-/// folder or a missing permission.
-pub fn check_writable(path: &std::path::Path) -> std::io::Result<()> {
-    use std::io::{Error, ErrorKind};
-    if path.is_dir() {
-        return Err(Error::new(ErrorKind::IsADirectory, "is a folder"));
-    }
-    let folder = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => std::path::Path::new("."),
-    };
-    if !folder.is_dir() {
-        return Err(Error::new(ErrorKind::NotFound, format!("folder {} does not exist", folder.display())));
-    }
-    let probe = folder.join(format!(".mrsmap-write-check-{}", std::process::id()));
-    std::fs::File::create(&probe)?;
-    std::fs::remove_file(&probe)
-}
-
-/// [`check_writable`] for each output given on the command line (`flag`, its path).
-pub fn check_outputs<'a>(
-    outputs: impl IntoIterator<Item = (&'static str, Option<&'a std::path::Path>)>,
-) -> anyhow::Result<()> {
-    for (flag, path) in outputs {
-        if let Some(path) = path {
-            check_writable(path).map_err(|e| anyhow::anyhow!("{flag} {}: cannot write there: {e}", path.display()))?;
-        }
-    }
-    Ok(())
-}
-
 /// Writes a run's output to `path` with `write`. If that fails at the end of a run (the
 /// disk filled up meanwhile, the folder was removed), the output is written into the
 /// system's temporary folder instead and the error says where: the results of a long
-/// run are not lost. (`check_outputs` catches the mistakes that are known before it.)
+/// run are not lost. (`app::outputs::check_outputs` catches the mistakes that are known
+/// before it.)
 pub fn write_or_rescue(
     path: &std::path::Path,
     write: impl Fn(&std::path::Path) -> anyhow::Result<()>,

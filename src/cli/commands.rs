@@ -4,7 +4,7 @@ use super::args::*;
 use anyhow::{Context, Result};
 use mrsmap::app;
 use mrsmap::app::interrupt::{INTERRUPTED_EXIT, Interrupted, Stop};
-use mrsmap::app::report::check_outputs;
+use mrsmap::app::outputs::{check_outputs, dataset_and_camera, named, tracker_inputs};
 use mrsmap::eval::{Associated, ErrorStats, aligned_positions, associate_stamped, ate_translation, rpe_translation};
 use mrsmap::io::tum::Trajectory;
 use std::path::Path;
@@ -53,7 +53,10 @@ pub fn track(a: TrackArgs) -> Result<ExitCode> {
     }
     if let Some(dataset) = a.dataset {
         let camera = a.camera.ok_or_else(|| anyhow::anyhow!("--dataset needs --camera (the dataset's camera file)"))?;
-        check_outputs([("--trajectory", a.trajectory.as_deref())])?;
+        let mut inputs = dataset_and_camera(&dataset, Some(&camera));
+        inputs.extend(tracker_inputs(&a.config, &config));
+        let trajectories = trajectory_files(a.trajectory.as_deref(), &config);
+        check_outputs(trajectories.iter().map(|p| ("--trajectory", Some(p.as_path()))), &inputs)?;
         let job = app::track_dataset::TrackDatasetJob {
             dataset,
             camera,
@@ -73,7 +76,7 @@ pub fn track(a: TrackArgs) -> Result<ExitCode> {
         max_frames: a.max_frames,
         idle_timeout: seconds(a.idle_timeout, "--idle-timeout")?,
     };
-    check_outputs([("--record", a.record.as_deref())])?;
+    check_outputs([("--record", a.record.as_deref())], &tracker_inputs(&a.config, &config))?;
     let record = a.record.map(|path| app::recorder::RecordOptions { path, last_seconds: a.record_last });
     let mut summary = app::tracker_process::run(&config, &limits, record.as_ref())?;
     app::tracker_process::print_summary(&config, &summary);
@@ -92,7 +95,10 @@ pub fn odometry_params(lambda: f64) -> mrsmap::odometry::OdometryParams {
 
 /// `mrsmap odometry`.
 pub fn odometry(a: OdometryArgs) -> Result<ExitCode> {
-    check_outputs([("--out", Some(a.out.as_path())), ("--timings", a.timings.as_deref())])?;
+    check_outputs(
+        [("--out", Some(a.out.as_path())), ("--timings", a.timings.as_deref())],
+        &dataset_and_camera(&a.dataset, Some(&a.camera)),
+    )?;
     let job = app::odometry::OdometryJob {
         dataset: a.dataset,
         camera: a.camera,
@@ -113,7 +119,9 @@ pub fn odometry(a: OdometryArgs) -> Result<ExitCode> {
 pub fn map(a: MapArgs) -> Result<ExitCode> {
     let mut params = mrsmap::slam::SlamParams { seed: a.seed, ..Default::default() };
     params.map.lambda = a.lambda;
-    check_outputs([("--out", a.out.as_deref()), ("--trajectory", a.trajectory.as_deref())])?;
+    let mut inputs = dataset_and_camera(&a.dataset, Some(&a.camera));
+    inputs.extend(a.object.as_deref().map(|o| named("the object file", o)));
+    check_outputs([("--out", a.out.as_deref()), ("--trajectory", a.trajectory.as_deref())], &inputs)?;
     let job = app::mapper::MapJob {
         dataset: a.dataset,
         camera: a.camera,
@@ -147,6 +155,7 @@ pub fn model(command: ModelCommand) -> Result<()> {
                 height,
                 ..Default::default()
             };
+            check_outputs([("--out", Some(out.as_path()))], &[named("the model file", &file)])?;
             let drawn = app::model_cmd::render_file(&file, &out, &view)?;
             println!("{drawn} surfels drawn → {}", out.display());
         }
@@ -182,7 +191,7 @@ pub fn camera(a: CameraArgs) -> Result<()> {
 
 /// `mrsmap poses`.
 pub fn poses(a: PosesArgs) -> Result<()> {
-    check_outputs([("--out", a.out.as_deref())])?;
+    check_outputs([("--out", a.out.as_deref())], &[])?;
     let job = app::poses_client::PosesJob {
         service: a.service,
         out: a.out,
@@ -226,6 +235,7 @@ pub fn eval(command: EvalCommand) -> Result<()> {
             app::quality_eval::print(&job, &trials, config.params.min_quality);
         }
         EvalCommand::Rpe { gt, est, delta, association, plot } => {
+            check_plot(plot.as_deref(), &gt, &est)?;
             let pairs = read_associated(&gt, &est, &association)?;
             let delta = usize::try_from(delta)?;
             let errors = rpe_translation(&pairs.reference, &pairs.estimate, delta)?;
@@ -238,6 +248,7 @@ pub fn eval(command: EvalCommand) -> Result<()> {
             }
         }
         EvalCommand::Ate { gt, est, association, plot } => {
+            check_plot(plot.as_deref(), &gt, &est)?;
             let pairs = read_associated(&gt, &est, &association)?;
             let errors = ate_translation(&pairs.reference, &pairs.estimate)?;
             let title = "ATE translation after rigid alignment";
@@ -252,6 +263,22 @@ pub fn eval(command: EvalCommand) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// `eval --plot` must not overwrite the trajectories it compares.
+fn check_plot(plot: Option<&Path>, gt: &Path, est: &Path) -> Result<()> {
+    check_outputs([("--plot", plot)], &[named("the reference trajectory", gt), named("the estimated trajectory", est)])
+}
+
+/// The files `--trajectory PATH` becomes: one per object of `config`
+/// (`app::poses_client::object_trajectory_path`).
+fn trajectory_files(
+    path: Option<&Path>,
+    config: &mrsmap::io::tracker_config::TrackerConfig,
+) -> Vec<std::path::PathBuf> {
+    let n = config.objects.len();
+    let Some(path) = path else { return Vec::new() };
+    config.objects.iter().map(|o| app::poses_client::object_trajectory_path(path, &o.name, n)).collect()
 }
 
 fn plot_title(metric: &str, est: &Path, gt: &Path) -> String {
@@ -363,7 +390,13 @@ pub fn replay(a: ReplayArgs) -> Result<ExitCode> {
     let mut config = mrsmap::io::tracker_config::read_tracker_config(&a.config)?;
     config.threads = a.threads.or(config.threads);
     let camera = a.camera.as_deref().map(mrsmap::io::camera_file::read_camera).transpose()?;
-    check_outputs([("--out", a.out.as_deref()), ("--trajectory", a.trajectory.as_deref())])?;
+    let mut inputs = vec![named("the input recording", &a.input)];
+    inputs.extend(tracker_inputs(&a.config, &config));
+    inputs.extend(a.camera.as_deref().map(|c| named("the camera file", c)));
+    let trajectories = trajectory_files(a.trajectory.as_deref(), &config);
+    let outputs = std::iter::once(("--out", a.out.as_deref()))
+        .chain(trajectories.iter().map(|p| ("--trajectory", Some(p.as_path()))));
+    check_outputs(outputs, &inputs)?;
     let job = app::replay::ReplayJob {
         input: a.input,
         out: a.out,
@@ -388,7 +421,7 @@ pub fn replay(a: ReplayArgs) -> Result<ExitCode> {
 pub fn convert(c: ConvertCommand) -> Result<ExitCode> {
     match c {
         ConvertCommand::TumToMcap(a) => {
-            check_outputs([("--out", Some(a.out.as_path()))])?;
+            check_outputs([("--out", Some(a.out.as_path()))], &dataset_and_camera(&a.dataset, a.camera.as_deref()))?;
             let job = app::convert::ConvertJob {
                 dataset: a.dataset,
                 camera: a.camera,

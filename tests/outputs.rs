@@ -1,0 +1,123 @@
+//! No command writes over a file it reads, or writes two outputs into one file: a
+//! mistyped path is refused before the run, naming the flag and the file, and the file
+//! is left as it was. Every file at stake here is a copy in a temporary folder.
+
+mod common;
+
+use common::*;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn path_str(p: &Path) -> &str {
+    p.to_str().expect("utf-8 path")
+}
+
+/// Runs `mrsmap` and returns its exit code and standard error.
+fn mrsmap(args: &[&str]) -> (Option<i32>, String) {
+    let out = Command::new(mrsmap_bin()).args(args).output().expect("binary runs");
+    (out.status.code(), String::from_utf8_lossy(&out.stderr).into_owned())
+}
+
+/// Asserts that the command failed before writing anything, with a message naming
+/// `flag`, `path` and what the file is, and that `path` still holds `before`.
+fn assert_refused(args: &[&str], flag: &str, path: &Path, what: &str, before: &[u8]) {
+    let (code, err) = mrsmap(args);
+    assert_eq!(code, Some(1), "{args:?}: {err}");
+    let said = format!("{flag} {} is {what}, which this run reads", path.display());
+    assert!(err.contains(&said), "{args:?}: expected `{said}` in: {err}");
+    assert_eq!(std::fs::read(path).expect("still there"), before, "{args:?} changed {}", path.display());
+}
+
+/// A copy of the shipped model, and a tracker configuration for it, in `dir`.
+fn model_and_config(dir: &Path, tag: &str) -> (PathBuf, PathBuf) {
+    let model = dir.join("teddy.mrsm");
+    std::fs::copy(root().join("models/teddy.mrsm"), &model).expect("copy the model");
+    let text = tracker_config_text(tag, "")
+        .replace(&root().join("models/teddy.mrsm").display().to_string(), &model.display().to_string());
+    let config = dir.join("tracker.toml");
+    std::fs::write(&config, text).expect("write config");
+    (model, config)
+}
+
+#[test]
+fn a_dataset_s_files_are_never_an_output() {
+    let clip = copy_clip("outputs-dataset");
+    let camera = fr3_camera_file();
+    let gt = clip.join("groundtruth.txt");
+    let gt_before = std::fs::read(&gt).expect("reads");
+    let assoc = clip.join("associations.txt");
+    let assoc_before = std::fs::read(&assoc).expect("reads");
+    let (d, c) = (path_str(&clip), path_str(&camera));
+    let what = "the dataset's groundtruth.txt";
+    assert_refused(
+        &["odometry", "--dataset", d, "--camera", c, "--out", path_str(&gt)],
+        "--out",
+        &gt,
+        what,
+        &gt_before,
+    );
+    // The same file by another spelling.
+    let other = clip.join("rgb/../groundtruth.txt");
+    let args = ["odometry", "--dataset", d, "--camera", c, "--out", "/dev/null", "--timings", path_str(&other)];
+    assert_refused(&args, "--timings", &other, what, &gt_before);
+    let args = ["map", "--dataset", d, "--camera", c, "--trajectory", path_str(&gt)];
+    assert_refused(&args, "--trajectory", &gt, what, &gt_before);
+    let args = ["convert", "tum-to-mcap", d, "--camera", c, "--out", path_str(&assoc), "--force"];
+    assert_refused(&args, "--out", &assoc, "the dataset's associations.txt", &assoc_before);
+    // The camera file too.
+    let camera_copy = clip.join("camera.toml");
+    std::fs::copy(&camera, &camera_copy).expect("copy");
+    let camera_before = std::fs::read(&camera_copy).expect("reads");
+    let args = ["odometry", "--dataset", d, "--camera", path_str(&camera_copy), "--out", path_str(&camera_copy)];
+    assert_refused(&args, "--out", &camera_copy, "the camera file", &camera_before);
+    // Two outputs in one file.
+    let traj = clip.join("traj.txt");
+    let (code, err) =
+        mrsmap(&["odometry", "--dataset", d, "--camera", c, "--out", path_str(&traj), "--timings", path_str(&traj)]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("--out and --timings name the same file"), "{err}");
+    assert!(!traj.exists(), "nothing was written");
+}
+
+#[test]
+fn a_recording_a_model_and_a_configuration_are_never_an_output() {
+    let dir = temp_dir("outputs-replay");
+    let (model, config) = model_and_config(&dir, "outputs");
+    let rec = dir.join("rec.mcap");
+    let (code, err) = mrsmap(&["convert", "tum-to-mcap", path_str(&teddy_clip()), "--out", path_str(&rec)]);
+    assert_eq!(code, Some(0), "{err}");
+    let rec_before = std::fs::read(&rec).expect("reads");
+    let model_before = std::fs::read(&model).expect("reads");
+    let config_before = std::fs::read(&config).expect("reads");
+    let (r, cfg) = (path_str(&rec), path_str(&config));
+    let poses = dir.join("poses.mcap");
+    // --force allows replacing an older output, never an input.
+    let args = ["replay", "--input", r, "--config", cfg, "--out", path_str(&poses), "--trajectory", r, "--force"];
+    assert_refused(&args, "--trajectory", &rec, "the input recording", &rec_before);
+    let args = ["replay", "--input", r, "--config", cfg, "--trajectory", path_str(&model)];
+    assert_refused(&args, "--trajectory", &model, "the model of 'teddy'", &model_before);
+    let args = ["replay", "--input", r, "--config", cfg, "--out", path_str(&config), "--force"];
+    assert_refused(&args, "--out", &config, "the tracker configuration", &config_before);
+    let (code, err) =
+        mrsmap(&["replay", "--input", r, "--config", cfg, "--out", path_str(&poses), "--trajectory", path_str(&poses)]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("--out and --trajectory name the same file"), "{err}");
+    // The tracker over a dataset, and recording a live run.
+    let (clip, camera) = (teddy_clip(), fr3_camera_file());
+    let (d, c) = (path_str(&clip), path_str(&camera));
+    let args = ["track", "--config", cfg, "--dataset", d, "--camera", c, "--trajectory", path_str(&model)];
+    assert_refused(&args, "--trajectory", &model, "the model of 'teddy'", &model_before);
+    let args = ["track", "--config", cfg, "--record", path_str(&config)];
+    assert_refused(&args, "--record", &config, "the tracker configuration", &config_before);
+    // A model's picture, and an evaluation's plot.
+    let args = ["model", "render", path_str(&model), "--out", path_str(&model)];
+    assert_refused(&args, "--out", &model, "the model file", &model_before);
+    let gt = dir.join("gt.txt");
+    std::fs::copy(teddy_clip().join("groundtruth.txt"), &gt).expect("copy");
+    let gt_before = std::fs::read(&gt).expect("reads");
+    for metric in ["rpe", "ate"] {
+        let args = ["eval", metric, path_str(&gt), path_str(&gt), "--plot", path_str(&gt)];
+        assert_refused(&args, "--plot", &gt, "the reference trajectory", &gt_before);
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
