@@ -109,6 +109,13 @@ fn a_recording_a_model_and_a_configuration_are_never_an_output() {
     assert_refused(&args, "--trajectory", &model, "the model of 'teddy'", &model_before);
     let args = ["track", "--config", cfg, "--record", path_str(&config)];
     assert_refused(&args, "--record", &config, "the tracker configuration", &config_before);
+    // A recording of an earlier live run is replaced only with --force.
+    let earlier = dir.join("earlier.mcap");
+    std::fs::copy(&rec, &earlier).expect("copy");
+    let (code, err) = mrsmap(&["track", "--config", cfg, "--record", path_str(&earlier), "--idle-timeout", "1"]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains(&format!("{} exists; pass --force to replace it", earlier.display())), "{err}");
+    assert_eq!(std::fs::read(&earlier).expect("still there"), rec_before);
     // A model's picture, and an evaluation's plot.
     let args = ["model", "render", path_str(&model), "--out", path_str(&model)];
     assert_refused(&args, "--out", &model, "the model file", &model_before);

@@ -45,7 +45,7 @@ fn record_live_here(tag: &str, last_seconds: Option<f64>, writer_apart: bool) ->
     let config = read_tracker_config(&config_path).expect("config");
     let mut tracker = LiveTracker::<RgbdFrameVga>::start(&config).expect("tracker starts");
     let path = dir.join("run.mcap");
-    tracker.record(&RecordOptions { path: path.clone(), last_seconds }).expect("recording starts");
+    tracker.record(&RecordOptions { path: path.clone(), last_seconds, force: false }).expect("recording starts");
     let _camera = start_looping_driver(&config.camera_service, "100");
     let limits = RunLimits { max_frames: Some(WARM_UP + COUNTED), idle_timeout: Some(Duration::from_secs(30)) };
     count_recorder_apart(writer_apart);

@@ -36,6 +36,9 @@ pub struct RecordOptions {
     pub path: PathBuf,
     /// Keep only the last this many seconds (by frame stamp), written at the end.
     pub last_seconds: Option<f64>,
+    /// Replace `path` if it exists (a live run cannot be recorded again: without this,
+    /// an existing file is an error).
+    pub force: bool,
 }
 
 /// What was recorded.
@@ -87,6 +90,12 @@ impl Recorder {
     pub fn start(options: &RecordOptions, names: &[String], max_pixels: usize) -> Result<Self> {
         if options.last_seconds.is_some_and(|s| !(s.is_finite() && s > 0.0)) {
             return Err(anyhow!("--record-last must be a positive number of seconds"));
+        }
+        if options.path.exists() && !options.force {
+            return Err(anyhow!(
+                "{} exists; pass --force to replace it (it may be the recording of an earlier run)",
+                options.path.display()
+            ));
         }
         let partial = crate::io::atomic::partial_path(&options.path);
         let mut file = McapFile::create(&partial, mcap::Compression::Lz4, DEFAULT_CHUNK_BYTES)

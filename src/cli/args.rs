@@ -133,6 +133,10 @@ pub struct TrackArgs {
     /// 55 MB per second of VGA at 30 Hz, allocated at start, and written at the end).
     #[arg(long, requires = "record")]
     pub record_last: Option<f64>,
+    /// Replace the --record file if it exists (without it, an existing file is an error:
+    /// a live run cannot be recorded again).
+    #[arg(long, requires = "record")]
+    pub force: bool,
     /// Offline: track every frame of this TUM dataset instead of listening to a camera.
     #[arg(long)]
     pub dataset: Option<PathBuf>,

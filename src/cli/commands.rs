@@ -77,7 +77,8 @@ pub fn track(a: TrackArgs) -> Result<ExitCode> {
         idle_timeout: seconds(a.idle_timeout, "--idle-timeout")?,
     };
     check_outputs([("--record", a.record.as_deref())], &tracker_inputs(&a.config, &config))?;
-    let record = a.record.map(|path| app::recorder::RecordOptions { path, last_seconds: a.record_last });
+    let record =
+        a.record.map(|path| app::recorder::RecordOptions { path, last_seconds: a.record_last, force: a.force });
     let mut summary = app::tracker_process::run(&config, &limits, record.as_ref())?;
     app::tracker_process::print_summary(&config, &summary);
     // Tracking went on; the failed recording still fails the command, after the summary.
