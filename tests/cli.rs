@@ -201,6 +201,11 @@ fn bad_paths_and_settings_are_refused_before_any_work() {
     let err = String::from_utf8_lossy(&out.stderr);
     let said = "--out /no/such/folder/teddy.png: cannot write there: folder /no/such/folder does not exist";
     assert!(err.contains(said) && !err.contains("cannot read"), "{err}");
+    // A view that is not a number (it drew an empty picture of "11115 surfels").
+    let out =
+        mrsmap(&["model", "render", path_str(&model), "--out", path_str(&dir.join("m.png")), "--distance", "nan"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.code() == Some(1) && err.contains("--distance must be a finite number"), "{err}");
     // A folder is not read as a file that lacks MCAP's magic bytes.
     let out = mrsmap(&["replay", "--input", path_str(&dir), "--config", path_str(&config), "--out", path_str(&poses)]);
     let err = String::from_utf8_lossy(&out.stderr);

@@ -118,7 +118,8 @@ pub fn render(map: &SurfelMap, view: &View) -> Picture {
     for (&s, mean) in surfels.iter().zip(&means) {
         let surfel = &map.surfels()[s as usize];
         let p = camera_from_map * Point3::from(*mean);
-        if p.z <= 1e-3 {
+        // Behind the eye (or not a number: nothing is drawn of it, and it is not counted).
+        if p.z.is_nan() || p.z <= 1e-3 {
             continue;
         }
         let normal = camera_from_map.rotation * map.normals()[s as usize].cast::<f64>();

@@ -204,7 +204,7 @@ pub enum ModelCommand {
         #[arg(long, default_value_t = 25.0, allow_negative_numbers = true)]
         elevation: f64,
         /// Distance from the model's centre (m) [default: the whole model in view].
-        #[arg(long)]
+        #[arg(long, allow_negative_numbers = true)]
         distance: Option<f64>,
         /// Image width (pixels).
         #[arg(long, default_value_t = 800)]

@@ -148,6 +148,12 @@ pub fn model(command: ModelCommand) -> Result<()> {
             if width == 0 || height == 0 || width > 8192 || height > 8192 {
                 anyhow::bail!("--width and --height must be 1..=8192 pixels");
             }
+            for (flag, value) in [("--azimuth", azimuth), ("--elevation", Some(elevation))] {
+                anyhow::ensure!(value.is_none_or(f64::is_finite), "{flag} must be a finite number of degrees");
+            }
+            if let Some(d) = distance {
+                anyhow::ensure!(d.is_finite() && d > 0.0, "--distance must be a finite number of metres > 0, not {d}");
+            }
             let view = app::render::View {
                 azimuth_deg: azimuth,
                 elevation_deg: elevation,
