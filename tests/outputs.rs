@@ -116,6 +116,13 @@ fn a_recording_a_model_and_a_configuration_are_never_an_output() {
     assert_eq!(code, Some(1), "{err}");
     assert!(err.contains(&format!("{} exists; pass --force to replace it", earlier.display())), "{err}");
     assert_eq!(std::fs::read(&earlier).expect("still there"), rec_before);
+    // So is what a crash left of one (`NAME.partial`).
+    let (fresh, crashed) = (dir.join("fresh.mcap"), dir.join("fresh.mcap.partial"));
+    std::fs::copy(&rec, &crashed).expect("copy");
+    let (code, err) = mrsmap(&["track", "--config", cfg, "--record", path_str(&fresh), "--idle-timeout", "1"]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains(&format!("{} exists: a recording that a crash left", crashed.display())), "{err}");
+    assert_eq!(std::fs::read(&crashed).expect("still there"), rec_before);
     // A model's picture, and an evaluation's plot.
     let args = ["model", "render", path_str(&model), "--out", path_str(&model)];
     assert_refused(&args, "--out", &model, "the model file", &model_before);

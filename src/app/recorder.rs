@@ -98,6 +98,13 @@ impl Recorder {
             ));
         }
         let partial = crate::io::atomic::partial_path(&options.path);
+        if partial.exists() && !options.force {
+            return Err(anyhow!(
+                "{} exists: a recording that a crash left (`mrsmap replay` reads it up to where it ends); \
+                 move it away, or pass --force to replace it",
+                partial.display()
+            ));
+        }
         let mut file = McapFile::create(&partial, mcap::Compression::Lz4, DEFAULT_CHUNK_BYTES)
             .with_context(|| format!("creating the recording {}", partial.display()))?;
         let t = RecordingTopics::default();
