@@ -258,6 +258,8 @@ fn missing_or_corrupt_models_stop_the_tracker_at_start_with_a_clear_error() {
 fn a_recording_that_cannot_be_written_is_named_at_start() {
     // The file exists and opens, but every write fails (a full disk): the tracker says
     // which recording it could not start instead of the MCAP crate's bare I/O error.
+    // (`--force`: the partial file stands where a crash would leave one, which is
+    // otherwise kept.)
     let dir = temp_dir("record-full");
     let config_path = write_tracker_config(&dir, "full", "");
     let partial = dir.join("run.mcap.partial");
@@ -265,7 +267,7 @@ fn a_recording_that_cannot_be_written_is_named_at_start() {
     std::os::unix::fs::symlink("/dev/full", &partial).expect("symlink");
     let record = dir.join("run.mcap");
     let out = Command::new(mrsmap_bin())
-        .args(["track", "--config", path(&config_path), "--record", path(&record), "--idle-timeout", "1"])
+        .args(["track", "--config", path(&config_path), "--record", path(&record), "--force", "--idle-timeout", "1"])
         .output()
         .expect("runs");
     let err = String::from_utf8_lossy(&out.stderr);
