@@ -23,8 +23,8 @@ pub fn dataset_inputs(dir: &Path) -> Vec<Input> {
 /// The files a tracker configuration brings in: the configuration itself and each
 /// object's model.
 pub fn tracker_inputs(config_path: &Path, config: &TrackerConfig) -> Vec<Input> {
-    let mut inputs = vec![("the tracker configuration".to_string(), config_path.to_path_buf())];
-    inputs.extend(config.objects.iter().map(|o| (format!("the model of '{}'", o.name), o.model.clone())));
+    let mut inputs = vec![named("the tracker configuration", config_path)];
+    inputs.extend(config.objects.iter().map(|o| named(&format!("the model of '{}'", o.name), &o.model)));
     inputs
 }
 
