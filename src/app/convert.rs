@@ -72,9 +72,7 @@ pub fn run(job: &ConvertJob) -> Result<ConvertSummary> {
     if !(1..=MAX_CHUNK_BYTES).contains(&job.chunk_bytes) {
         bail!("chunk size {} must be 1 ..= {MAX_CHUNK_BYTES} bytes", job.chunk_bytes);
     }
-    if job.out.exists() && !job.force {
-        bail!("{} exists; pass --force to replace it", job.out.display());
-    }
+    super::outputs::refuse_to_replace(&job.out, job.force, None)?;
     // The dataset first: a missing folder is said as such, not as an unknown camera.
     let dataset =
         TumDataset::open(&job.dataset).with_context(|| format!("opening dataset {}", job.dataset.display()))?;

@@ -105,14 +105,9 @@ pub fn run(job: &MapJob) -> Result<MapSummary> {
     if job.out.is_none() && job.trajectory.is_none() {
         bail!("nothing to write: give --out (the model) and/or --trajectory");
     }
-    if let Some(out) = &job.out
-        && out.exists()
-        && !job.force
-    {
-        bail!(
-            "{} exists; pass --force to replace it (the old model is kept until the new one is complete)",
-            out.display()
-        );
+    if let Some(out) = &job.out {
+        let note = "the old model is kept until the new one is complete";
+        super::outputs::refuse_to_replace(out, job.force, Some(note))?;
     }
     let camera = read_camera(&job.camera)?;
     let object = job.object.as_ref().map(|p| read_object(p)).transpose()?;

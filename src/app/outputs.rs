@@ -64,6 +64,16 @@ pub fn check_outputs<'a>(
     Ok(())
 }
 
+/// Refuses to replace `path` if it exists and `force` is not given: "PATH exists; pass
+/// --force to replace it", followed by ` (note)` when there is one.
+pub fn refuse_to_replace(path: &Path, force: bool, note: Option<&str>) -> anyhow::Result<()> {
+    if path.exists() && !force {
+        let note = note.map(|n| format!(" ({n})")).unwrap_or_default();
+        anyhow::bail!("{} exists; pass --force to replace it{note}", path.display());
+    }
+    Ok(())
+}
+
 /// Checks, before a long run, that a file can be written at `path` (once the run ends):
 /// `path` is not a folder, its folder exists, and a file can be created there (one is
 /// created and removed). A run's results are then not lost at its end to a mistyped
@@ -175,6 +185,20 @@ mod tests {
         assert!(check_outputs([("--out", Some(a.as_path())), ("--trajectory", Some(b.as_path()))], &[]).is_err());
         let c = dir.join("traj.txt");
         check_outputs([("--out", Some(a.as_path())), ("--trajectory", Some(c.as_path()))], &[]).expect("two files");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn an_existing_file_is_replaced_only_with_force() {
+        let dir = scratch("replace");
+        let (old, new) = (dir.join("old.mcap"), dir.join("new.mcap"));
+        std::fs::write(&old, "").expect("writes");
+        let err = refuse_to_replace(&old, false, None).expect_err("exists").to_string();
+        assert_eq!(err, format!("{} exists; pass --force to replace it", old.display()));
+        let err = refuse_to_replace(&old, false, Some("why")).expect_err("exists").to_string();
+        assert_eq!(err, format!("{} exists; pass --force to replace it (why)", old.display()));
+        refuse_to_replace(&old, true, None).expect("forced");
+        refuse_to_replace(&new, false, None).expect("a new file");
         let _ = std::fs::remove_dir_all(&dir);
     }
 

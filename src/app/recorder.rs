@@ -91,12 +91,8 @@ impl Recorder {
         if options.last_seconds.is_some_and(|s| !(s.is_finite() && s > 0.0)) {
             return Err(anyhow!("--record-last must be a positive number of seconds"));
         }
-        if options.path.exists() && !options.force {
-            return Err(anyhow!(
-                "{} exists; pass --force to replace it (it may be the recording of an earlier run)",
-                options.path.display()
-            ));
-        }
+        let note = "it may be the recording of an earlier run";
+        super::outputs::refuse_to_replace(&options.path, options.force, Some(note))?;
         let partial = crate::io::atomic::partial_path(&options.path);
         if partial.exists() && !options.force {
             return Err(anyhow!(

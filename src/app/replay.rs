@@ -76,9 +76,7 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
         bail!("--every must be at least 1");
     }
     if let Some(out) = &job.out {
-        if out.exists() && !job.force {
-            bail!("{} exists; pass --force to replace it", out.display());
-        }
+        super::outputs::refuse_to_replace(out, job.force, None)?;
         // (The command line checks every output against every input before; this guards
         // the library's callers. A missing input is reported by the reader, naming it.)
         if super::outputs::same_file(out, &job.input) {
