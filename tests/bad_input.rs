@@ -94,7 +94,7 @@ fn odometry_skips_damaged_frames_and_says_so() {
     std::fs::write(&frames[3].rgb_path, &bytes[..100]).expect("truncate");
     write_depth16(&frames[5].depth_path, 640, 480, &vec![0u16; 640 * 480]).expect("write");
     let out = dir.join("traj.txt");
-    let s = run(&odometry_job(dir.clone(), out.clone(), 2)).expect("the other frames are processed");
+    let s = run(&odometry_job(dir.to_path_buf(), out.clone(), 2)).expect("the other frames are processed");
     assert_eq!((s.frames, s.skipped), (6, 2));
     let text = std::fs::read_to_string(&out).expect("trajectory");
     assert_eq!(text.lines().filter(|l| !l.starts_with('#')).count(), 6);
@@ -118,7 +118,8 @@ fn odometry_with_the_wrong_camera_fails_at_the_first_frame() {
 
 #[test]
 fn missing_dataset_is_a_clear_error() {
-    let job = odometry_job("/nonexistent/dataset".into(), temp_dir("missing").join("t.txt"), 1);
+    let dir = temp_dir("missing");
+    let job = odometry_job("/nonexistent/dataset".into(), dir.join("t.txt"), 1);
     let err = run(&job).expect_err("no dataset");
     assert!(format!("{err:#}").contains("/nonexistent/dataset"), "{err:#}");
 }
@@ -162,7 +163,7 @@ fn a_frame_without_overlap_is_marked_failed_and_the_pose_held() {
     let away = step(2.0) * left_increment(&Vector6::new(0.0, 0.0, 0.0, 0.0, std::f64::consts::PI, 0.0));
     write_rendered_dataset(&dir, &[step(0.0), step(1.0), away, step(3.0)]);
     let out = dir.join("traj.txt");
-    let mut job = odometry_job(dir.clone(), out.clone(), 2);
+    let mut job = odometry_job(dir.to_path_buf(), out.clone(), 2);
     job.camera = dir.join("cam.toml");
     std::fs::write(
         &job.camera,

@@ -72,7 +72,8 @@ fn a_map_without_colour_statistics_is_not_saved() {
     let target = render_frame(&room(9), tiny_camera(), &mrsmap::geometry::Pose::identity());
     let map = build_map_with(&target, mrsmap::map::MapParams { color_scatter: false, ..Default::default() });
     let model = Model { map, ..golden_model() };
-    let path = temp_dir("no-colour").join("m.mrsm");
+    let dir = temp_dir("no-colour");
+    let path = dir.join("m.mrsm");
     let err = mrsmap::model::save(&path, &model).expect_err("refused");
     assert!(matches!(err, ModelError::NoColorScatter { .. }), "{err}");
     assert!(err.to_string().contains("colour statistics"), "{err}");

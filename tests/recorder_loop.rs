@@ -17,7 +17,7 @@ use mrsmap::app::tracker_process::{LiveTracker, RunLimits, StopReason};
 use mrsmap::io::recording::{RecordingReader, RecordingTopics};
 use mrsmap::io::tracker_config::read_tracker_config;
 use mrsmap::io::wire::RgbdFrameVga;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 
@@ -30,22 +30,24 @@ const COUNTED: u64 = 300;
 /// Runs the live loop with a recording (`last_seconds`: a ring, or `None`: the whole run)
 /// on a thread of its own (a thread can start one `LiveTracker` only) and returns the
 /// allocations counted in the frames after warm-up on every thread but the writer's, the
-/// writer's own (when `writer_apart`), what was recorded and the file.
+/// writer's own (when `writer_apart`), what was recorded and the folder holding the
+/// file (`run.mcap`).
 fn record_live(
     tag: &'static str,
     last_seconds: Option<f64>,
     writer_apart: bool,
-) -> (usize, usize, RecordStats, PathBuf) {
+) -> (usize, usize, RecordStats, TempDir) {
     std::thread::spawn(move || record_live_here(tag, last_seconds, writer_apart)).join().expect("the run completes")
 }
 
-fn record_live_here(tag: &str, last_seconds: Option<f64>, writer_apart: bool) -> (usize, usize, RecordStats, PathBuf) {
+fn record_live_here(tag: &str, last_seconds: Option<f64>, writer_apart: bool) -> (usize, usize, RecordStats, TempDir) {
     let dir = temp_dir(tag);
     let config_path = write_tracker_config(&dir, tag, "");
     let config = read_tracker_config(&config_path).expect("config");
     let mut tracker = LiveTracker::<RgbdFrameVga>::start(&config).expect("tracker starts");
-    let path = dir.join("run.mcap");
-    tracker.record(&RecordOptions { path: path.clone(), last_seconds, force: false }).expect("recording starts");
+    tracker
+        .record(&RecordOptions { path: dir.join("run.mcap"), last_seconds, force: false })
+        .expect("recording starts");
     let _camera = start_looping_driver(&config.camera_service, "100");
     let limits = RunLimits { max_frames: Some(WARM_UP + COUNTED), idle_timeout: Some(Duration::from_secs(30)) };
     count_recorder_apart(writer_apart);
@@ -65,7 +67,7 @@ fn record_live_here(tag: &str, last_seconds: Option<f64>, writer_apart: bool) ->
     let stats = tracker.finish_recording().expect("recording finishes").expect("a recording");
     println!("{tag}: {summary:?}\n{stats:?}\n{allocations} allocations, {writer_allocations} on the writer thread");
     assert_eq!(summary.stop, StopReason::FrameLimit, "the driver kept sending");
-    (allocations, writer_allocations, stats, path)
+    (allocations, writer_allocations, stats, dir)
 }
 
 fn frames_in(path: &Path) -> u64 {
@@ -81,7 +83,7 @@ fn frames_in(path: &Path) -> u64 {
 fn the_live_loop_with_a_recording_allocates_nothing_per_frame() {
     // A ring: nothing on any thread. The clip spans 0.23 s and loops (its stamps jump
     // back): a 0.1 s window.
-    let (allocations, _, stats, path) = record_live("recloop-ring", Some(0.1), false);
+    let (allocations, _, stats, dir) = record_live("recloop-ring", Some(0.1), false);
     assert_eq!(
         allocations,
         0,
@@ -89,10 +91,10 @@ fn the_live_loop_with_a_recording_allocates_nothing_per_frame() {
         first_allocation()
     );
     assert!(stats.written >= 1 && stats.written <= 8, "the last 0.1 s: {stats:?}");
-    assert_eq!(frames_in(&path), stats.written);
+    assert_eq!(frames_in(&dir.join("run.mcap")), stats.written);
     // The whole run: the writer thread compresses and writes (and allocates for it);
     // the loop and the tracker's workers allocate nothing.
-    let (allocations, writer_allocations, stats, path) = record_live("recloop-whole", None, true);
+    let (allocations, writer_allocations, stats, dir) = record_live("recloop-whole", None, true);
     assert_eq!(
         allocations,
         0,
@@ -101,5 +103,5 @@ fn the_live_loop_with_a_recording_allocates_nothing_per_frame() {
     );
     assert!(writer_allocations > 0, "the writer's allocations are counted apart, not lost");
     assert!(stats.written >= COUNTED, "the whole run: {stats:?}");
-    assert_eq!(frames_in(&path), stats.written);
+    assert_eq!(frames_in(&dir.join("run.mcap")), stats.written);
 }

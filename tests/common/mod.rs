@@ -7,7 +7,7 @@ use mrsmap::frame::RgbdFrame;
 use mrsmap::geometry::{CameraModel, PinholeIntrinsics, Pose};
 use mrsmap::map::{MapBuilder, MapCapacity, MapParams, SurfelMap};
 use mrsmap::synthetic::{Mesh, RenderTarget, render};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// The repository root.
 pub fn root() -> PathBuf {
@@ -64,16 +64,52 @@ pub fn pose_error(a: &Pose, b: &Pose) -> (f64, f64) {
     (d.translation.vector.norm(), d.rotation.angle().to_degrees())
 }
 
-/// A fresh, empty temporary folder for one test.
-pub fn temp_dir(name: &str) -> PathBuf {
+/// A fresh, empty temporary folder for one test, removed when the test passes and
+/// kept (its path printed) when it fails, so a run of the suite leaves nothing behind
+/// but the evidence of a failure.
+#[must_use = "the folder is removed when this guard is dropped"]
+pub struct TempDir(PathBuf);
+
+impl TempDir {
+    /// The folder as an owned path (for APIs that take a `PathBuf`).
+    pub fn to_path_buf(&self) -> PathBuf {
+        self.0.clone()
+    }
+}
+
+impl std::ops::Deref for TempDir {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl AsRef<Path> for TempDir {
+    fn as_ref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        if std::thread::panicking() {
+            eprintln!("kept the failed test's folder {}", self.0.display());
+        } else {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+}
+
+/// A fresh, empty temporary folder for one test (see [`TempDir`]).
+pub fn temp_dir(name: &str) -> TempDir {
     let dir = std::env::temp_dir().join(format!("mrsmap-test-{}-{name}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).expect("temp dir");
-    dir
+    TempDir(dir)
 }
 
 /// Copies the shipped clip into a temporary folder (to damage it).
-pub fn copy_clip(name: &str) -> PathBuf {
+pub fn copy_clip(name: &str) -> TempDir {
     let dst = temp_dir(name);
     let src = teddy_clip();
     for sub in ["rgb", "depth"] {
