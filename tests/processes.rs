@@ -318,3 +318,52 @@ fn camera_replays_mcap_and_the_tracker_records_what_it_receives() {
     }
     assert_eq!(count, 8, "one recorded pose per tracked frame");
 }
+
+#[test]
+fn a_tracker_restarts_while_clients_hold_its_poses() {
+    // A client keeps the pose blackboard after its tracker stops (iceoryx2 removes a
+    // service with its last user). A tracker that exited reopens it, and a client that
+    // never lets go keeps reading; a second tracker on the same poses is refused; one
+    // that restarts after a crash waits until the clients let go (`mrsmap poses` does).
+    let dir = temp_dir("restart");
+    let config_path = write_tracker_config(&dir, "restart", "");
+    let config = read_tracker_config(&config_path).expect("config");
+    let track = || start(&["track", "--config", path(&config_path)]);
+    let (first, first_err) = track();
+    wait_for(&first_err, "ready", 60);
+    let driver = TestDriver::new(&config.camera_service);
+    let node = ipc::node("test_reader").expect("node");
+    let poses = ipc::open_poses(&node, &config.poses_service).expect("the tracker created the blackboard");
+    let reader = poses.reader_builder().create().expect("reader");
+    let entry = reader.entry::<ObjectPose>(&0).expect("object 0");
+    driver.send(1, |_| {});
+    assert_eq!(read_pose(&entry, 1).status, status::TRACKING);
+    let (second, _) = track();
+    let (code, _) = finish(second, 60);
+    assert_eq!(code, Some(1), "a second tracker on the same poses is refused");
+    signal(&first.0, "INT");
+    assert_eq!(finish(first, 30).0, Some(0));
+    // Restarted while this client holds the blackboard: the same entry carries its poses.
+    let (restarted, restarted_err) = track();
+    wait_for(&restarted_err, "ready", 60);
+    assert_eq!(entry.get().frame_send_stamp_ns, 0, "the earlier tracker's last pose is not offered as new");
+    driver.send(2, |_| {});
+    assert_eq!(read_pose(&entry, 2).status, status::TRACKING, "the client reads the restarted tracker");
+    // A crash: its entry stays claimed until no client holds the blackboard.
+    let (client, client_err) = start(&["poses", "--service", &config.poses_service, "--count", "2", "--timeout", "60"]);
+    wait_for(&client_err, "reading", 30);
+    drop((entry, reader, poses, node));
+    signal(&restarted.0, "KILL");
+    drop(restarted);
+    let (after_crash, after_crash_err) = track();
+    let seen = wait_for(&after_crash_err, "ready", 60);
+    assert!(seen.iter().any(|l| l.contains("crashed")), "{seen:?}");
+    wait_for(&client_err, "the tracker stopped", 30);
+    wait_for(&client_err, "reading", 30);
+    driver.send(3, |_| {});
+    let (code, out) = finish(client, 60);
+    assert_eq!(code, Some(0), "{out}");
+    assert!(out.contains("poses: 2 messages") && out.contains("2 tracking"), "{out}");
+    signal(&after_crash.0, "INT");
+    assert_eq!(finish(after_crash, 30).0, Some(0));
+}

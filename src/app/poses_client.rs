@@ -8,6 +8,8 @@ use crate::io::ipc::{self, IpcError, now_ns};
 use crate::io::tum::{format_pose_line, format_stamp};
 use crate::io::wire::{LAYOUT_VERSION, ObjectPose, status};
 use anyhow::{Context, Result};
+use iceoryx2::node::Node;
+use iceoryx2::service::port_factory::PortFactory as _;
 use nalgebra::{Quaternion, Translation3, UnitQuaternion};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -67,39 +69,92 @@ fn status_name(s: u32) -> &'static str {
 }
 
 /// Reads the tracker's poses until a signal, `count` or `timeout`: waits on the pose
-/// event (no polling), then takes every object's entry whose pose is new.
+/// event (no polling), then takes every object's entry whose pose is new. When the
+/// tracker stops, lets go of its pose blackboard (a tracker that crashed can only
+/// restart once no client holds it) and waits for the next one.
 pub fn run(job: &PosesJob) -> Result<PosesSummary> {
     let node = ipc::node("mrsmap_poses")?;
+    let mut reading = Reading { summary: PosesSummary::default(), trajectories: BTreeMap::new(), last: Instant::now() };
+    let mut found = false;
+    while let Some(service) = wait_for_tracker(&node, job, &reading, found)? {
+        found = true;
+        if read_poses(&node, job, &service, &mut reading)? == Stop::Done {
+            break;
+        }
+        log_line(format_args!("poses: the tracker stopped; waiting for it to come back on {}", job.service));
+    }
+    if let Some(out) = &job.out {
+        write_trajectories(out, &reading.trajectories)?;
+    }
+    Ok(reading.summary)
+}
+
+/// What the client has read so far.
+struct Reading {
+    summary: PosesSummary,
+    trajectories: BTreeMap<String, String>,
+    /// When the last pose (or the start) was.
+    last: Instant,
+}
+
+#[derive(PartialEq)]
+enum Stop {
+    /// A signal, the count or the timeout.
+    Done,
+    /// No tracker writes the poses any more.
+    TrackerGone,
+}
+
+/// Opens the pose blackboard once a tracker writes it; `None` on a signal, or when the
+/// timeout passed after earlier poses (before any tracker was found it is an error).
+fn wait_for_tracker(
+    node: &Node<ipc::Ipc>,
+    job: &PosesJob,
+    reading: &Reading,
+    found: bool,
+) -> Result<Option<ipc::PoseBlackboard>> {
     let started = Instant::now();
-    let service = loop {
-        match ipc::open_poses(&node, &job.service) {
-            Ok(s) => break s,
+    loop {
+        match ipc::open_poses(node, &job.service) {
+            // One without a writer is a stopped tracker's, kept by clients: not held.
+            Ok(s) if s.dynamic_config().number_of_writers() > 0 => return Ok(Some(s)),
+            Ok(_) => {}
             Err(e) => {
-                if job.timeout.is_some_and(|t| started.elapsed() > t) {
+                if !found && job.timeout.is_some_and(|t| started.elapsed() > t) {
                     return Err(e).context("no tracker publishes poses there (is `mrsmap track` running?)");
                 }
-                if started.elapsed() < Duration::from_millis(300) {
+                if !found && started.elapsed() < Duration::from_millis(300) {
                     log_line(format_args!("poses: waiting for the tracker to open {}", job.service));
-                }
-                if node.wait(Duration::from_millis(200)).is_err() {
-                    return Ok(PosesSummary::default());
                 }
             }
         }
-    };
-    let events = ipc::events(&node, &job.service)?;
+        if found && job.timeout.is_some_and(|t| reading.last.elapsed() > t) {
+            return Ok(None);
+        }
+        if node.wait(Duration::from_millis(200)).is_err() {
+            return Ok(None);
+        }
+    }
+}
+
+/// Reads poses from `service` until a signal, the count, the timeout, or until no
+/// tracker writes there any more.
+fn read_poses(
+    node: &Node<ipc::Ipc>,
+    job: &PosesJob,
+    service: &ipc::PoseBlackboard,
+    reading: &mut Reading,
+) -> Result<Stop> {
+    let events = ipc::events(node, &job.service)?;
     let reader = service.reader_builder().create().map_err(|e| IpcError::new("pose reader", e))?;
     let entries: Vec<_> = (0..ipc::MAX_OBJECTS).map_while(|k| reader.entry::<ObjectPose>(&k).ok()).collect();
     let listener = events.listener_builder().create().map_err(|e| IpcError::new("pose listener", e))?;
     let mut seen = vec![0u64; entries.len()];
     log_line(format_args!("poses: reading {} ({} object(s))", job.service, entries.len()));
-    let mut summary = PosesSummary::default();
-    let mut trajectories: BTreeMap<String, String> = BTreeMap::new();
-    let mut last = Instant::now();
-    'outer: loop {
+    loop {
         let waited = listener.timed_wait(|_| {}, Duration::from_millis(200));
         if node.wait(Duration::ZERO).is_err() {
-            break;
+            return Ok(Stop::Done);
         }
         waited.map_err(|e| IpcError::new("waiting for poses", e))?;
         for (k, entry) in entries.iter().enumerate() {
@@ -108,20 +163,19 @@ pub fn run(job: &PosesJob) -> Result<PosesSummary> {
                 continue;
             }
             seen[k] = pose.publish_stamp_ns;
-            last = Instant::now();
-            handle(job, &pose, &mut summary, &mut trajectories);
-            if job.count.is_some_and(|c| summary.received >= c) {
-                break 'outer;
+            reading.last = Instant::now();
+            handle(job, &pose, &mut reading.summary, &mut reading.trajectories);
+            if job.count.is_some_and(|c| reading.summary.received >= c) {
+                return Ok(Stop::Done);
             }
         }
-        if job.timeout.is_some_and(|t| last.elapsed() > t) {
-            break;
+        if job.timeout.is_some_and(|t| reading.last.elapsed() > t) {
+            return Ok(Stop::Done);
+        }
+        if service.dynamic_config().number_of_writers() == 0 {
+            return Ok(Stop::TrackerGone);
         }
     }
-    if let Some(out) = &job.out {
-        write_trajectories(out, &trajectories)?;
-    }
-    Ok(summary)
 }
 
 fn handle(job: &PosesJob, p: &ObjectPose, summary: &mut PosesSummary, trajectories: &mut BTreeMap<String, String>) {

@@ -20,8 +20,6 @@ use iceoryx2::node::Node;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::subscriber::Subscriber;
-use iceoryx2::port::writer::{EntryHandleMut, Writer};
-use iceoryx2::service::port_factory::blackboard;
 use std::time::{Duration, Instant};
 
 /// When to stop (besides SIGINT/SIGTERM).
@@ -55,7 +53,7 @@ pub struct RunSummary {
     pub skipped_frames: u64,
     /// Why it stopped.
     pub stop: StopReason,
-    /// Tracking time per frame and object (ms), the last ≤ `RING` frames, object 0.
+    /// Tracking time per frame (ms), all objects together, the last ≤ `RING` frames.
     pub track_ms: Vec<f64>,
     /// Driver send → poses published (ms), same frames.
     pub latency_ms: Vec<f64>,
@@ -86,6 +84,31 @@ pub struct LiveTracker<F: WireFrame> {
     poses_name: String,
 }
 
+/// Creates (or reopens) the pose blackboard `name` and becomes its writer
+/// ([`ipc::publish_poses`]). While clients keep an earlier tracker's blackboard that
+/// cannot be written (see [`ipc::PosesKept`]), waits for them to let go.
+fn publish_poses(node: &Node<Ipc>, name: &str, initial: &[ObjectPose]) -> Result<ipc::PosePorts> {
+    let mut said = None;
+    loop {
+        let why = match ipc::publish_poses(node, name, initial)? {
+            Ok(ports) => return Ok(ports),
+            Err(why) => why,
+        };
+        if said != Some(why) {
+            log_line(format_args!(
+                "tracker: the pose blackboard {name} is kept by its clients, and {why}; waiting for them to let go \
+                 (`mrsmap poses` does by itself; restart other clients)"
+            ));
+            said = Some(why);
+        }
+        if node.wait(Duration::from_millis(200)).is_err() {
+            anyhow::bail!(
+                "stopped by a signal while waiting for the clients of {name} to let go of an earlier tracker's poses"
+            );
+        }
+    }
+}
+
 /// The part of the process the loop changes (apart from the listener the WaitSet holds).
 struct Core<F: WireFrame> {
     tracker: Tracker,
@@ -93,10 +116,8 @@ struct Core<F: WireFrame> {
     out: StepOutput,
     names: Vec<String>,
     subscriber: Subscriber<Ipc, F, ()>,
-    entries: Vec<EntryHandleMut<Ipc, u32, ObjectPose>>,
+    poses: ipc::PosePorts,
     notifier: Notifier<Ipc>,
-    _writer: Writer<Ipc, u32>,
-    _poses: blackboard::PortFactory<Ipc, u32>,
     track_ms: Vec<f64>,
     latency_ms: Vec<f64>,
     last_sequence: Option<u64>,
@@ -127,26 +148,21 @@ impl<F: WireFrame> LiveTracker<F> {
         let out = StepOutput::new(tracker.len());
         let initial: Vec<ObjectPose> =
             (0..tracker.len()).map(|k| pose_message(&names[k], &out, k, (0, 0), 0.0)).collect();
-        let poses = ipc::create_poses(&node, &config.poses_service, &initial)?;
+        let poses = publish_poses(&node, &config.poses_service, &initial)?;
         let pose_events = ipc::events(&node, &config.poses_service)?;
-        let err = |what: &str, e: &dyn std::fmt::Debug| IpcError::new(format!("{what} on {frames_name}"), e);
-        let subscriber = frames.subscriber_builder().create().map_err(|e| err("subscriber", &e))?;
-        let listener = frame_events.listener_builder().create().map_err(|e| err("listener", &e))?;
-        let writer = poses.writer_builder().create().map_err(|e| err("pose writer", &e))?;
-        let entries = (0..tracker.len() as u32)
-            .map(|k| writer.entry::<ObjectPose>(&k).map_err(|e| err("pose entry", &e)))
-            .collect::<Result<Vec<_>, _>>()?;
-        let notifier = pose_events.notifier_builder().create().map_err(|e| err("pose notifier", &e))?;
+        let err = |what: &str, name: &str, e: &dyn std::fmt::Debug| IpcError::new(format!("{what} on {name}"), e);
+        let subscriber = frames.subscriber_builder().create().map_err(|e| err("subscriber", &frames_name, &e))?;
+        let listener = frame_events.listener_builder().create().map_err(|e| err("listener", &frames_name, &e))?;
+        let notifier =
+            pose_events.notifier_builder().create().map_err(|e| err("pose notifier", &config.poses_service, &e))?;
         let core = Core {
             out,
             tracker,
             pool,
             names,
             subscriber,
-            entries,
+            poses,
             notifier,
-            _writer: writer,
-            _poses: poses,
             track_ms: Vec::with_capacity(RING),
             latency_ms: Vec::with_capacity(RING),
             last_sequence: None,
@@ -267,7 +283,7 @@ impl<F: WireFrame> Core<F> {
             }
         };
         let total_ms = received.elapsed().as_secs_f32() * 1e3;
-        for (k, entry) in self.entries.iter().enumerate() {
+        for (k, entry) in self.poses.entries.iter().enumerate() {
             entry.update_with_copy(pose_message(
                 &self.names[k],
                 &self.out,
@@ -284,7 +300,8 @@ impl<F: WireFrame> Core<F> {
         drop(sample);
         summary.frames += 1;
         if !invalid && self.track_ms.len() < RING {
-            self.track_ms.push(f64::from(self.out.build_ms[0] + self.out.register_ms[0]));
+            let all_objects = self.out.build_ms.iter().zip(&self.out.register_ms).map(|(b, r)| f64::from(b + r)).sum();
+            self.track_ms.push(all_objects);
             self.latency_ms.push((now_ns().saturating_sub(header.send_stamp_ns)) as f64 * 1e-6);
         }
         observer(&FrameEvent { frames: summary.frames, invalid, output: &self.out });
@@ -346,8 +363,8 @@ pub fn print_summary(config: &TrackerConfig, s: &RunSummary) {
     );
     if !s.track_ms.is_empty() {
         println!(
-            "  tracking '{}' per frame: median {:.2} ms, p99 {:.2} ms; driver send → poses published: median {:.2} ms, p99 {:.2} ms",
-            config.objects[0].name,
+            "  tracking {} per frame: median {:.2} ms, p99 {:.2} ms; driver send → poses published: median {:.2} ms, p99 {:.2} ms",
+            config.objects.iter().map(|o| format!("'{}'", o.name)).collect::<Vec<_>>().join(" + "),
             percentile(&s.track_ms, 0.5),
             percentile(&s.track_ms, 0.99),
             percentile(&s.latency_ms, 0.5),

@@ -5,7 +5,7 @@
 //! |---|---|---|
 //! | `<camera>/rgbd/vga`, `<camera>/rgbd/qvga` | [`RgbdFrameVga`](super::wire::RgbdFrameVga) / [`RgbdFrameQvga`](super::wire::RgbdFrameQvga) | safe overflow, subscriber buffer 1 (a late subscriber gets the newest frame, stale ones are overwritten, the driver is never blocked), history 0, ≤ 2 publishers, ≤ 8 subscribers |
 //! | same name, event | — | the driver notifies after each send; subscribers wait on it (no polling) |
-//! | `mrsmap/poses` | blackboard, key `u32` object id → [`ObjectPose`] | created by the tracker (its only writer), ≤ 16 readers; each entry holds the object's newest pose |
+//! | `mrsmap/poses` | blackboard, key `u32` object id → [`ObjectPose`] | created by the tracker (its only writer; a restarted tracker reopens the one its clients kept), ≤ 16 readers; each entry holds the object's newest pose |
 //! | `mrsmap/poses`, event | — | the tracker notifies after each frame's poses |
 //!
 //! Poses go on a blackboard rather than a publish–subscribe service: updating an entry
@@ -16,7 +16,9 @@
 
 use super::wire::{ObjectPose, WireFrame};
 use iceoryx2::node::Node;
+use iceoryx2::port::writer::EntryHandleMutError;
 use iceoryx2::prelude::*;
+use iceoryx2::service::builder::blackboard::BlackboardCreateError;
 use iceoryx2::service::port_factory::{blackboard, event, publish_subscribe};
 
 /// The iceoryx2 service flavour of every port: inter-process shared memory.
@@ -117,14 +119,41 @@ pub fn events(node: &Node<Ipc>, name: &str) -> Result<event::PortFactory<Ipc>, I
 /// Most objects a pose blackboard holds (keys `0..`).
 pub const MAX_OBJECTS: u32 = 64;
 
-/// Creates the pose blackboard `name` (by default [`POSES_SERVICE`]): one entry per
-/// object, key = object id, holding its newest [`ObjectPose`]. The tracker creates it
-/// (and is its only writer); clients open it.
-pub fn create_poses(
+/// The pose blackboard's ports as the tracker holds them (dropped in this order).
+pub struct PosePorts {
+    /// One entry per object, key = object id, holding its newest pose.
+    pub entries: Vec<PoseEntry>,
+    /// The blackboard's only writer.
+    pub writer: PoseWriter,
+    /// The blackboard.
+    pub service: PoseBlackboard,
+}
+
+/// The pose blackboard (key = object id).
+pub type PoseBlackboard = blackboard::PortFactory<Ipc, u32>;
+
+/// The tracker's writer of the pose blackboard.
+pub type PoseWriter = iceoryx2::port::writer::Writer<Ipc, u32>;
+
+/// One object's entry in the pose blackboard, as its writer holds it.
+pub type PoseEntry = iceoryx2::port::writer::EntryHandleMut<Ipc, u32, ObjectPose>;
+
+/// Creates the pose blackboard `name` (by default [`POSES_SERVICE`]) with one entry per
+/// object of `initial` (key = object id) and becomes its writer. Clients open it.
+///
+/// A blackboard lives as long as any process holds it, so after a tracker stopped its
+/// clients may still keep it. One whose tracker exited is opened again, its entries set
+/// to `initial` (no client reads the earlier tracker's last poses as new), and the
+/// clients keep reading without a restart. A kept blackboard that cannot be used (the
+/// entries of a tracker that crashed stay claimed in iceoryx2 0.10 until the blackboard
+/// goes; one of a tracker with fewer objects lacks entries) gives [`PosesKept`]: the
+/// caller waits for the clients to let go (`mrsmap poses` does once no tracker writes)
+/// and tries again. Refused when another tracker writes there.
+pub fn publish_poses(
     node: &Node<Ipc>,
     name: &str,
     initial: &[ObjectPose],
-) -> Result<blackboard::PortFactory<Ipc, u32>, IpcError> {
+) -> Result<Result<PosePorts, PosesKept>, IpcError> {
     if initial.len() > MAX_OBJECTS as usize {
         return Err(IpcError::new(format!("pose blackboard {name}"), format!("more than {MAX_OBJECTS} objects")));
     }
@@ -132,13 +161,44 @@ pub fn create_poses(
     for (k, pose) in initial.iter().enumerate() {
         builder = builder.add::<ObjectPose>(k as u32, *pose);
     }
-    builder
-        .create()
-        .map_err(|e| IpcError::new(format!("creating pose blackboard {name} (is another tracker running?)"), e))
+    let service = match builder.create() {
+        Ok(service) => service,
+        Err(BlackboardCreateError::AlreadyExists) => open_poses(node, name)?,
+        Err(e) => return Err(IpcError::new(format!("creating pose blackboard {name}"), e)),
+    };
+    let writer = service.writer_builder().create().map_err(|e| {
+        let what = format!(
+            "writing poses on {name} (another tracker publishes there: stop it, or choose another [poses] service)"
+        );
+        IpcError::new(what, e)
+    })?;
+    let mut entries = Vec::with_capacity(initial.len());
+    for (k, pose) in initial.iter().enumerate() {
+        match writer.entry::<ObjectPose>(&(k as u32)) {
+            Ok(entry) => {
+                entry.update_with_copy(*pose);
+                entries.push(entry);
+            }
+            Err(EntryHandleMutError::HandleAlreadyExists) => return Ok(Err(PosesKept::OfCrashedTracker)),
+            Err(EntryHandleMutError::EntryDoesNotExist) => return Ok(Err(PosesKept::WithFewerObjects)),
+        }
+    }
+    Ok(Ok(PosePorts { entries, writer, service }))
+}
+
+/// Why the pose blackboard that clients keep from an earlier tracker cannot be written.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum PosesKept {
+    /// That tracker crashed: its entries stay claimed while the blackboard exists.
+    #[error("it holds the entries of a tracker that crashed")]
+    OfCrashedTracker,
+    /// That tracker had fewer objects.
+    #[error("it was made by a tracker with fewer objects")]
+    WithFewerObjects,
 }
 
 /// Opens the pose blackboard `name`.
-pub fn open_poses(node: &Node<Ipc>, name: &str) -> Result<blackboard::PortFactory<Ipc, u32>, IpcError> {
+pub fn open_poses(node: &Node<Ipc>, name: &str) -> Result<PoseBlackboard, IpcError> {
     node.service_builder(&service_name(name)?)
         .blackboard_opener::<u32>()
         .max_readers(16)
