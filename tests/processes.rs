@@ -367,3 +367,22 @@ fn a_tracker_restarts_while_clients_hold_its_poses() {
     signal(&after_crash.0, "INT");
     assert_eq!(finish(after_crash, 30).0, Some(0));
 }
+
+#[test]
+fn a_driver_of_the_other_image_size_is_pointed_out() {
+    // The tracker listens for QVGA, the driver sends VGA: no frame arrives, and the
+    // tracker says why instead of only that none came.
+    let dir = temp_dir("other-size");
+    let text = tracker_config_text("othersize", "").replace("[camera]\n", "[camera]\nsize = \"qvga\"\n");
+    let config_path = dir.join("tracker.toml");
+    std::fs::write(&config_path, text).expect("write config");
+    let config = read_tracker_config(&config_path).expect("config");
+    let (tracker, tracker_err) = start(&["track", "--config", path(&config_path), "--idle-timeout", "10"]);
+    wait_for(&tracker_err, "ready", 60);
+    let _camera = start_looping_driver(&config.camera_service, "30");
+    let seen = wait_for(&tracker_err, "no frame", 30);
+    let line = seen.last().expect("the line");
+    assert!(line.contains("/rgbd/vga exists") && line.contains("--qvga"), "{line}");
+    signal(&tracker.0, "INT");
+    assert_eq!(finish(tracker, 30).0, Some(0));
+}

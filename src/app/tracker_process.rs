@@ -81,6 +81,8 @@ pub struct LiveTracker<F: WireFrame> {
     core: Core<F>,
     /// The frame and pose services, for the log.
     frames_name: String,
+    /// The frame service of the other image size on the same camera (for diagnostics).
+    other_size_name: String,
     poses_name: String,
 }
 
@@ -169,7 +171,25 @@ impl<F: WireFrame> LiveTracker<F> {
             recorder: None,
         };
         let poses_name = config.poses_service.clone();
-        Ok(LiveTracker { node, listener, core, frames_name, poses_name })
+        let other_size_name = config.frame_size.other().service(&config.camera_service);
+        Ok(LiveTracker { node, listener, core, frames_name, other_size_name, poses_name })
+    }
+
+    /// Says that no frame came, and why when it can tell: a driver publishing the other
+    /// image size (`mrsmap camera` with or without `--qvga` against `camera.size`).
+    fn report_no_frames(&self) {
+        if ipc::frame_service_exists(&self.other_size_name) {
+            log_line(format_args!(
+                "tracker: no frame on {} for 2 s, but {} exists: is the camera driver publishing the other image \
+                 size? (`mrsmap camera --qvga` publishes QVGA; the tracker's size is `camera.size` in its config); waiting",
+                self.frames_name, self.other_size_name
+            ));
+        } else {
+            log_line(format_args!(
+                "tracker: no frame on {} for 2 s (is a camera driver publishing there?); waiting",
+                self.frames_name
+            ));
+        }
     }
 
     /// The loop: wait for a frame, track, publish; until a signal or a limit.
@@ -209,10 +229,7 @@ impl<F: WireFrame> LiveTracker<F> {
                     break;
                 }
             } else if last_frame.elapsed() > Duration::from_secs(2) && !waiting_reported {
-                log_line(format_args!(
-                    "tracker: no frame on {} for 2 s (is a camera driver publishing there?); waiting",
-                    self.frames_name
-                ));
+                self.report_no_frames();
                 waiting_reported = true;
             }
             if limits.idle_timeout.is_some_and(|t| last_frame.elapsed() > t) {

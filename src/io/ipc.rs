@@ -62,6 +62,14 @@ impl FrameSize {
         }
     }
 
+    /// The other size.
+    pub fn other(&self) -> FrameSize {
+        match self {
+            FrameSize::Vga => FrameSize::Qvga,
+            FrameSize::Qvga => FrameSize::Vga,
+        }
+    }
+
     /// Width and height.
     pub fn dimensions(&self) -> (u32, u32) {
         match self {
@@ -104,6 +112,14 @@ pub fn frames<F: WireFrame>(
         .max_subscribers(8)
         .open_or_create()
         .map_err(|e| IpcError::new(format!("opening frame service {name}"), e))
+}
+
+/// Whether a frame service `name` exists (some process, such as a camera driver, holds
+/// it). For diagnostics only; an error counts as no.
+pub fn frame_service_exists(name: &str) -> bool {
+    service_name(name).is_ok_and(|n| {
+        Ipc::does_exist(&n, Config::global_config(), MessagingPattern::PublishSubscribe).unwrap_or(false)
+    })
 }
 
 /// The event service `name` that accompanies a publish–subscribe service.
