@@ -386,3 +386,17 @@ fn a_driver_of_the_other_image_size_is_pointed_out() {
     signal(&tracker.0, "INT");
     assert_eq!(finish(tracker, 30).0, Some(0));
 }
+
+#[test]
+fn a_client_given_an_impossible_service_name_says_so_at_once() {
+    // Not "no tracker publishes there" after the whole timeout: no tracker ever could.
+    let started = std::time::Instant::now();
+    let out = Command::new(mrsmap_bin())
+        .args(["poses", "--service", &"a".repeat(300), "--timeout", "30"])
+        .output()
+        .expect("runs");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("service name") && err.contains("ExceedsMaximumLength"), "{err}");
+    assert!(started.elapsed() < Duration::from_secs(10), "it waited {:?}", started.elapsed());
+}

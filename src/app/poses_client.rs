@@ -73,6 +73,7 @@ fn status_name(s: u32) -> &'static str {
 /// tracker stops, lets go of its pose blackboard (a tracker that crashed can only
 /// restart once no client holds it) and waits for the next one.
 pub fn run(job: &PosesJob) -> Result<PosesSummary> {
+    ipc::check_service_name(&job.service)?;
     let node = ipc::node("mrsmap_poses")?;
     let mut reading = Reading { summary: PosesSummary::default(), trajectories: BTreeMap::new(), last: Instant::now() };
     let mut found = false;

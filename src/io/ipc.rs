@@ -97,6 +97,12 @@ fn service_name(name: &str) -> Result<ServiceName, IpcError> {
     ServiceName::new(name).map_err(|e| IpcError::new(format!("service name {name}"), e))
 }
 
+/// Whether `name` is a valid iceoryx2 service name (a process that waits for a service
+/// checks first, rather than waiting for one that cannot exist).
+pub fn check_service_name(name: &str) -> Result<(), IpcError> {
+    service_name(name).map(|_| ())
+}
+
 /// The frame service `name` (publish–subscribe with the QoS above).
 pub fn frames<F: WireFrame>(
     node: &Node<Ipc>,
