@@ -42,6 +42,11 @@ inputs() {
 
 cargo +nightly fuzz build
 mkdir -p fuzz/logs
+# The targets write their scratch files (one set per process) under TMPDIR: a folder of
+# this run's, removed at the end.
+scratch=$(mktemp -d -t mrsmap-fuzz-scratch.XXXXXX)
+trap 'rm -rf "$scratch"' EXIT
+export TMPDIR=$scratch
 # Runs libFuzzer; on a failure shows the end of its log (the panic and the input's path).
 run() {
     local t=$1 log="fuzz/logs/$1.log"; shift
