@@ -89,6 +89,45 @@ fn look_at(eye: &Vector3<f64>, target: &Vector3<f64>) -> Pose {
     map_from_camera.inverse()
 }
 
+/// Where to look from direction `to_eye` (unit, from the model towards the eye), and
+/// from how far, so that every disc (centre `points[k]`, radius `radii[k]`, m) is in view
+/// with a margin: the target is the middle of the points' extent across the viewing
+/// direction, and the distance the least at which the frustum of half-angle tangents
+/// `tan_h`, `tan_v` holds them all.
+fn fit_view(
+    points: &[Vector3<f64>],
+    radii: &[f64],
+    to_eye: &Vector3<f64>,
+    tan_h: f64,
+    tan_v: f64,
+) -> (Vector3<f64>, f64) {
+    // The camera's axes (x right, y down, z forward) for this direction.
+    let axes = look_at(to_eye, &Vector3::zeros()).rotation;
+    let in_axes: Vec<Vector3<f64>> = points.iter().map(|p| axes * p).collect();
+    let (mut lo, mut hi) = (Vector3::repeat(f64::INFINITY), Vector3::repeat(f64::NEG_INFINITY));
+    for p in &in_axes {
+        lo = lo.inf(p);
+        hi = hi.sup(p);
+    }
+    let middle = 0.5 * (lo + hi);
+    // 8 % of the view kept free at each edge.
+    let (tan_h, tan_v) = (tan_h / 1.08, tan_v / 1.08);
+    // From distance d, a disc of radius r at q from the target (camera axes) is in view
+    // where |q.x| + r ≤ (d + q.z)·tan_h and |q.y| + r ≤ (d + q.z)·tan_v.
+    let distance = in_axes
+        .iter()
+        .zip(radii)
+        .map(|(p, r)| {
+            let q = p - middle;
+            ((q.x.abs() + r) / tan_h).max((q.y.abs() + r) / tan_v) - q.z
+        })
+        .fold(0.05, f64::max);
+    (axes.inverse() * middle, distance)
+}
+
+/// A surfel is drawn as a disc of this radius in units of its cell's size.
+const DISC_RADIUS: f64 = 0.7;
+
 /// Renders the map from `view`.
 pub fn render(map: &SurfelMap, view: &View) -> Picture {
     let (w, h) = (view.width.max(1) as usize, view.height.max(1) as usize);
@@ -101,16 +140,17 @@ pub fn render(map: &SurfelMap, view: &View) -> Picture {
         return Picture { width: w as u32, height: h as u32, rgb, drawn: 0 };
     }
     let means: Vec<Vector3<f64>> = surfels.iter().map(|&s| map.surfels()[s as usize].mean.cast()).collect();
-    let center = means.iter().sum::<Vector3<f64>>() / means.len() as f64;
-    let radius = means.iter().map(|m| (m - center).norm()).fold(0.0, f64::max).max(0.05);
     let half_fov = (view.fov_deg.clamp(5.0, 170.0) * 0.5).to_radians();
-    // Frame the whole map in the narrower of the two fields of view.
-    let half_fov_v = (half_fov.tan() * h as f64 / w as f64).atan();
-    let distance = view.distance_m.unwrap_or(1.1 * radius / half_fov.min(half_fov_v).sin());
+    let tan_h = half_fov.tan();
+    let tan_v = tan_h * h as f64 / w as f64;
     let el = view.elevation_deg.to_radians();
     let az = view.azimuth_deg.map_or_else(|| most_seen_azimuth(map, &surfels, el), f64::to_radians);
-    let eye = center + distance * Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
-    let camera_from_map = look_at(&eye, &center);
+    let to_eye = Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
+    let radii: Vec<f64> =
+        surfels.iter().map(|&s| DISC_RADIUS * map.resolution(map.surfels()[s as usize].level as usize)).collect();
+    let (center, fit_distance) = fit_view(&means, &radii, &to_eye, tan_h, tan_v);
+    let distance = view.distance_m.unwrap_or(fit_distance);
+    let camera_from_map = look_at(&(center + distance * to_eye), &center);
     let f = 0.5 * w as f64 / half_fov.tan();
     let (cx, cy) = (0.5 * w as f64, 0.5 * h as f64);
     let mut zbuf = vec![f64::INFINITY; w * h];
@@ -131,7 +171,7 @@ pub fn render(map: &SurfelMap, view: &View) -> Picture {
         let shade = 0.45 + 0.55 * facing.abs();
         let colour = lab_to_rgb8([surfel.color.x, surfel.color.y, surfel.color.z]).map(|c| (c as f64 * shade) as u8);
         let (u, v) = (cx + f * p.x / p.z, cy + f * p.y / p.z);
-        let r = (f * 0.7 * map.resolution(surfel.level as usize) / p.z).max(0.7);
+        let r = (f * DISC_RADIUS * map.resolution(surfel.level as usize) / p.z).max(0.7);
         let (u0, u1) = ((u - r).floor().max(0.0) as usize, ((u + r).ceil() as usize).min(w.saturating_sub(1)));
         let (v0, v1) = ((v - r).floor().max(0.0) as usize, ((v + r).ceil() as usize).min(h.saturating_sub(1)));
         if u - r > w as f64 || v - r > h as f64 || u + r < 0.0 || v + r < 0.0 {
@@ -155,6 +195,34 @@ pub fn render(map: &SurfelMap, view: &View) -> Picture {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_fitted_view_holds_every_disc_with_a_margin() {
+        // A long, flat box of points with one far corner, seen obliquely.
+        let mut points = Vec::new();
+        for i in 0..20 {
+            for j in 0..5 {
+                points.push(Vector3::new(i as f64 * 0.1, j as f64 * 0.05, 0.0));
+            }
+        }
+        points.push(Vector3::new(3.0, -1.0, 0.4));
+        let radii = vec![0.01; points.len()];
+        let (el, az) = (25f64.to_radians(), 40f64.to_radians());
+        let to_eye = Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
+        let (tan_h, tan_v) = (25f64.to_radians().tan(), 25f64.to_radians().tan() * 0.75);
+        let (center, distance) = fit_view(&points, &radii, &to_eye, tan_h, tan_v);
+        let camera_from_map = look_at(&(center + distance * to_eye), &center);
+        let (mut widest_h, mut widest_v) = (0.0f64, 0.0f64);
+        for (p, r) in points.iter().zip(&radii) {
+            let q = camera_from_map * Point3::from(*p);
+            assert!(q.z > 0.0);
+            widest_h = widest_h.max((q.x.abs() + r) / q.z / tan_h);
+            widest_v = widest_v.max((q.y.abs() + r) / q.z / tan_v);
+        }
+        // Every disc inside the margin, and the tighter side of the view filled to it.
+        assert!(widest_h <= 1.0 / 1.08 + 1e-9 && widest_v <= 1.0 / 1.08 + 1e-9, "{widest_h} {widest_v}");
+        assert!((widest_h.max(widest_v) - 1.0 / 1.08).abs() < 1e-6, "{widest_h} {widest_v}");
+    }
 
     #[test]
     fn look_at_puts_the_target_straight_ahead() {
