@@ -14,7 +14,7 @@ pub struct View {
     pub azimuth_deg: Option<f64>,
     /// Angle above the `xy` plane (degrees).
     pub elevation_deg: f64,
-    /// Distance from the map's centre (m); `None` frames the whole map.
+    /// Distance from the middle of the map as seen (m); `None`: the least that holds it all in view.
     pub distance_m: Option<f64>,
     /// Image width (pixels).
     pub width: u32,

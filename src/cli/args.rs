@@ -203,7 +203,7 @@ pub enum ModelCommand {
         /// Viewing angle above the model's xy plane (degrees).
         #[arg(long, default_value_t = 25.0, allow_negative_numbers = true)]
         elevation: f64,
-        /// Distance from the model's centre (m) [default: the whole model in view].
+        /// Distance from the model (m; to the middle of its extent as seen) [default: the least that holds the whole model in view].
         #[arg(long, allow_negative_numbers = true)]
         distance: Option<f64>,
         /// Image width (pixels).
