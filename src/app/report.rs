@@ -14,6 +14,17 @@ pub fn percentile(values: &[f64], q: f64) -> f64 {
     v[rank - 1]
 }
 
+/// Adds `value` as the sample numbered `index` (0, 1, … in the order they come) to
+/// `samples`, which keep the most recent `cap`: once full, the oldest is overwritten
+/// (no allocation, so a process left running keeps a bounded record).
+pub fn push_recent(samples: &mut Vec<f64>, index: u64, cap: usize, value: f64) {
+    if samples.len() < cap {
+        samples.push(value);
+    } else if let Some(slot) = samples.get_mut((index % cap.max(1) as u64) as usize) {
+        *slot = value;
+    }
+}
+
 /// A progress bar on a terminal (hidden when stderr is not one), after a line on stderr
 /// that says what starts and how to stop it (see `app::interrupt`).
 pub fn progress_bar(len: u64, what: &str) -> ProgressBar {
@@ -102,6 +113,16 @@ impl std::error::Error for OutputsFailed {}
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn recent_samples_keep_the_last_ones() {
+        let mut samples = Vec::new();
+        for i in 0..10u64 {
+            push_recent(&mut samples, i, 4, i as f64);
+        }
+        samples.sort_by(f64::total_cmp);
+        assert_eq!(samples, [6.0, 7.0, 8.0, 9.0]);
+    }
 
     #[test]
     fn an_output_that_cannot_be_written_is_rescued_into_the_temporary_folder() {

@@ -9,7 +9,7 @@
 //! idle camera.
 
 use super::recorder::{RecordOptions, RecordStats, Recorder};
-use super::report::{log_line, percentile};
+use super::report::{log_line, percentile, push_recent};
 use super::tracking::{StepOutput, Workers, invalid_frame, load_tracker, pose_message, track_frame};
 use crate::io::ipc::{self, FrameSize, Ipc, IpcError, now_ns};
 use crate::io::tracker_config::TrackerConfig;
@@ -123,6 +123,8 @@ struct Core<F: WireFrame> {
     track_ms: Vec<f64>,
     latency_ms: Vec<f64>,
     last_sequence: Option<u64>,
+    /// Frames whose times were sampled (valid ones).
+    timed_frames: u64,
     recorder: Option<Recorder>,
 }
 
@@ -168,6 +170,7 @@ impl<F: WireFrame> LiveTracker<F> {
             track_ms: Vec::with_capacity(RING),
             latency_ms: Vec::with_capacity(RING),
             last_sequence: None,
+            timed_frames: 0,
             recorder: None,
         };
         let poses_name = config.poses_service.clone();
@@ -316,10 +319,12 @@ impl<F: WireFrame> Core<F> {
         }
         drop(sample);
         summary.frames += 1;
-        if !invalid && self.track_ms.len() < RING {
+        if !invalid {
             let all_objects = self.out.build_ms.iter().zip(&self.out.register_ms).map(|(b, r)| f64::from(b + r)).sum();
-            self.track_ms.push(all_objects);
-            self.latency_ms.push((now_ns().saturating_sub(header.send_stamp_ns)) as f64 * 1e-6);
+            let latency_ms = now_ns().saturating_sub(header.send_stamp_ns) as f64 * 1e-6;
+            push_recent(&mut self.track_ms, self.timed_frames, RING, all_objects);
+            push_recent(&mut self.latency_ms, self.timed_frames, RING, latency_ms);
+            self.timed_frames += 1;
         }
         observer(&FrameEvent { frames: summary.frames, invalid, output: &self.out });
         Ok(true)
