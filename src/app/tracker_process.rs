@@ -280,7 +280,7 @@ impl<F: WireFrame> Core<F> {
         let message = sample.payload();
         let header = *message.header();
         if let Some(last) = self.last_sequence
-            && header.sequence > last + 1
+            && header.sequence > last.saturating_add(1)
         {
             summary.skipped_frames += header.sequence - last - 1;
         }
