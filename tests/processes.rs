@@ -343,6 +343,14 @@ fn a_tracker_restarts_while_clients_hold_its_poses() {
     assert_eq!(code, Some(1), "a second tracker on the same poses is refused");
     signal(&first.0, "INT");
     assert_eq!(finish(first, 30).0, Some(0));
+    // Meanwhile the blackboard has no writer: a client does not take it for a tracker.
+    let out = Command::new(mrsmap_bin())
+        .args(["poses", "--service", &config.poses_service, "--timeout", "1"])
+        .output()
+        .expect("runs");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("no tracker publishes") && err.contains("a tracker that stopped"), "{err}");
     // Restarted while this client holds the blackboard: the same entry carries its poses.
     let (restarted, restarted_err) = track();
     wait_for(&restarted_err, "ready", 60);

@@ -7,7 +7,7 @@ use crate::geometry::Pose;
 use crate::io::ipc::{self, IpcError, now_ns};
 use crate::io::tum::{format_pose_line, format_stamp};
 use crate::io::wire::{LAYOUT_VERSION, ObjectPose, status};
-use anyhow::{Context, Result};
+use anyhow::Result;
 use iceoryx2::node::Node;
 use iceoryx2::service::port_factory::PortFactory as _;
 use nalgebra::{Quaternion, Translation3, UnitQuaternion};
@@ -121,18 +121,17 @@ fn wait_for_tracker(
 ) -> Result<Option<ipc::PoseBlackboard>> {
     let started = Instant::now();
     loop {
-        match ipc::open_poses(node, &job.service) {
-            // One without a writer is a stopped tracker's, kept by clients: not held.
+        let cause = match ipc::open_poses(node, &job.service) {
             Ok(s) if s.dynamic_config().number_of_writers() > 0 => return Ok(Some(s)),
-            Ok(_) => {}
-            Err(e) => {
-                if !found && job.timeout.is_some_and(|t| started.elapsed() > t) {
-                    return Err(e).context("no tracker publishes poses there (is `mrsmap track` running?)");
-                }
-                if !found && started.elapsed() < Duration::from_millis(300) {
-                    log_line(format_args!("poses: waiting for the tracker to open {}", job.service));
-                }
-            }
+            // One without a writer is a stopped tracker's, kept by clients: not held.
+            Ok(_) => anyhow::anyhow!("its pose blackboard is kept by clients of a tracker that stopped"),
+            Err(e) => e.into(),
+        };
+        if !found && job.timeout.is_some_and(|t| started.elapsed() > t) {
+            return Err(cause.context("no tracker publishes poses there (is `mrsmap track` running?)"));
+        }
+        if !found && started.elapsed() < Duration::from_millis(300) {
+            log_line(format_args!("poses: waiting for the tracker to open {}", job.service));
         }
         if found && job.timeout.is_some_and(|t| reading.last.elapsed() > t) {
             return Ok(None);
