@@ -2,7 +2,7 @@
 //! and optionally writes TUM trajectories — the example a robot integrator copies.
 
 use super::interrupt::Interrupted;
-use super::report::{both_written, log_line, percentile, push_recent, write_bytes_or_rescue};
+use super::report::{RECENT_SAMPLES, both_written, log_line, percentile, push_recent, write_bytes_or_rescue};
 use crate::geometry::Pose;
 use crate::io::ipc::{self, IpcError, now_ns};
 use crate::io::tum::{format_pose_line, format_stamp};
@@ -39,16 +39,13 @@ pub struct PosesSummary {
     pub received: u64,
     /// Per object name: (tracking, lost, initialising, invalid frame) counts.
     pub by_status: BTreeMap<String, [u64; 4]>,
-    /// Driver send → pose received (ms), the most recent `RECENT` poses (of valid frames).
+    /// Driver send → pose received (ms), the most recent `RECENT_SAMPLES` poses (of valid frames).
     pub latency_ms: Vec<f64>,
     /// Tracking time reported by the tracker (ms), same poses.
     pub track_ms: Vec<f64>,
     /// Poses whose times were sampled.
     pub timed: u64,
 }
-
-/// How many recent poses' times a client keeps (it may run for days).
-const RECENT: usize = 100_000;
 
 /// The pose in a message.
 pub fn camera_from_object(p: &ObjectPose) -> Pose {
@@ -199,8 +196,8 @@ fn handle(job: &PosesJob, p: &ObjectPose, summary: &mut PosesSummary, trajectori
     }
     let pose = camera_from_object(p);
     if p.status != status::INVALID_FRAME {
-        push_recent(&mut summary.latency_ms, summary.timed, RECENT, latency_ms);
-        push_recent(&mut summary.track_ms, summary.timed, RECENT, f64::from(p.build_ms + p.register_ms));
+        push_recent(&mut summary.latency_ms, summary.timed, RECENT_SAMPLES, latency_ms);
+        push_recent(&mut summary.track_ms, summary.timed, RECENT_SAMPLES, f64::from(p.build_ms + p.register_ms));
         summary.timed += 1;
     }
     if job.print {

@@ -14,6 +14,10 @@ pub fn percentile(values: &[f64], q: f64) -> f64 {
     v[rank - 1]
 }
 
+/// How many recent samples of a time the long-running processes (the tracker, the pose
+/// client) keep for their summaries: about an hour at 30 Hz.
+pub const RECENT_SAMPLES: usize = 100_000;
+
 /// Adds `value` as the sample numbered `index` (0, 1, … in the order they come) to
 /// `samples`, which keep the most recent `cap`: once full, the oldest is overwritten
 /// (no allocation, so a process left running keeps a bounded record).

@@ -9,7 +9,7 @@
 //! idle camera.
 
 use super::recorder::{RecordOptions, RecordStats, Recorder};
-use super::report::{log_line, percentile, push_recent};
+use super::report::{RECENT_SAMPLES, log_line, percentile, push_recent};
 use super::tracking::{StepOutput, Workers, invalid_frame, load_tracker, pose_message, track_frame};
 use crate::io::ipc::{self, FrameSize, Ipc, IpcError, now_ns};
 use crate::io::tracker_config::TrackerConfig;
@@ -53,7 +53,7 @@ pub struct RunSummary {
     pub skipped_frames: u64,
     /// Why it stopped.
     pub stop: StopReason,
-    /// Tracking time per frame (ms), all objects together, the last ≤ `RING` frames.
+    /// Tracking time per frame (ms), all objects together, the last ≤ `RECENT_SAMPLES` frames.
     pub track_ms: Vec<f64>,
     /// Driver send → poses published (ms), same frames.
     pub latency_ms: Vec<f64>,
@@ -71,8 +71,6 @@ pub struct FrameEvent<'a> {
     /// The estimates and timings.
     pub output: &'a StepOutput,
 }
-
-const RING: usize = 100_000;
 
 /// A running tracker for frames of type `F`.
 pub struct LiveTracker<F: WireFrame> {
@@ -167,8 +165,8 @@ impl<F: WireFrame> LiveTracker<F> {
             subscriber,
             poses,
             notifier,
-            track_ms: Vec::with_capacity(RING),
-            latency_ms: Vec::with_capacity(RING),
+            track_ms: Vec::with_capacity(RECENT_SAMPLES),
+            latency_ms: Vec::with_capacity(RECENT_SAMPLES),
             last_sequence: None,
             timed_frames: 0,
             recorder: None,
@@ -322,8 +320,8 @@ impl<F: WireFrame> Core<F> {
         if !invalid {
             let all_objects = self.out.build_ms.iter().zip(&self.out.register_ms).map(|(b, r)| f64::from(b + r)).sum();
             let latency_ms = now_ns().saturating_sub(header.send_stamp_ns) as f64 * 1e-6;
-            push_recent(&mut self.track_ms, self.timed_frames, RING, all_objects);
-            push_recent(&mut self.latency_ms, self.timed_frames, RING, latency_ms);
+            push_recent(&mut self.track_ms, self.timed_frames, RECENT_SAMPLES, all_objects);
+            push_recent(&mut self.latency_ms, self.timed_frames, RECENT_SAMPLES, latency_ms);
             self.timed_frames += 1;
         }
         observer(&FrameEvent { frames: summary.frames, invalid, output: &self.out });
