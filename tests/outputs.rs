@@ -135,3 +135,40 @@ fn a_recording_a_model_and_a_configuration_are_never_an_output() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// An output named through a symbolic link is written into the file the link names
+/// (the link stays); one named by a device or pipe (`/dev/stdout`) is written to, never
+/// replaced by a regular file; an MCAP output, written with seeks, must be a file.
+#[cfg(unix)]
+#[test]
+fn outputs_go_through_links_into_files_and_into_devices_as_they_are() {
+    let dir = temp_dir("outputs-links");
+    std::fs::create_dir(dir.join("results")).expect("a folder");
+    let (file, link) = (dir.join("results/run1.txt"), dir.join("traj.txt"));
+    std::fs::write(&file, "old").expect("writes");
+    std::os::unix::fs::symlink(&file, &link).expect("a symbolic link");
+    let (clip, camera) = (teddy_clip(), fr3_camera_file());
+    let (d, c) = (path_str(&clip), path_str(&camera));
+    let (code, err) = mrsmap(&["odometry", "--dataset", d, "--camera", c, "--out", path_str(&link)]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(std::fs::symlink_metadata(&link).expect("exists").file_type().is_symlink(), "the link stays a link");
+    let written = std::fs::read_to_string(&file).expect("reads");
+    assert!(written.starts_with("# mrsmap odometry") && written.lines().count() > 8, "{written}");
+    // Standard output: the trajectory, and a picture, piped on.
+    let run = |args: &[&str]| Command::new(mrsmap_bin()).args(args).output().expect("binary runs");
+    let out = run(&["odometry", "--dataset", d, "--camera", c, "--out", "/dev/stdout"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = String::from_utf8_lossy(&out.stdout);
+    let poses = text.lines().filter(|l| l.split(' ').filter(|v| v.parse::<f64>().is_ok()).count() == 8).count();
+    assert!(text.contains("# mrsmap odometry") && poses == 8, "{text}");
+    let model = root().join("models/teddy.mrsm");
+    let out = run(&["model", "render", path_str(&model), "--out", "/dev/stdout"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(out.stdout.starts_with(b"\x89PNG\r\n\x1a\n"), "a PNG on standard output");
+    assert!(std::fs::symlink_metadata("/dev/stdout").expect("exists").file_type().is_symlink());
+    // A recording cannot go to a device.
+    let (code, err) = mrsmap(&["convert", "tum-to-mcap", d, "--out", "/dev/null", "--force"]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("--out /dev/null") && err.contains("not a regular file"), "{err}");
+    assert!(!std::fs::metadata("/dev/null").expect("exists").is_file(), "/dev/null is still a device");
+}

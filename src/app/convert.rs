@@ -92,7 +92,8 @@ pub fn run(job: &ConvertJob) -> Result<ConvertSummary> {
     }
     // Written next to the target and renamed at the end: a failed run leaves no half
     // file; an interrupted one a finished file of the frames so far.
-    let partial = crate::io::atomic::partial_path(&job.out);
+    let out = crate::io::atomic::file_destination(&job.out).with_context(|| format!("--out {}", job.out.display()))?;
+    let partial = crate::io::atomic::partial_path(&out);
     let mut file = McapFile::create(&partial, job.compression, job.chunk_bytes)
         .with_context(|| format!("creating {}", partial.display()))?;
     // A write that fails (a full disk) removes the partial file: it is derived from the
@@ -108,7 +109,7 @@ pub fn run(job: &ConvertJob) -> Result<ConvertSummary> {
             return Err(e.context(format!("writing {} (its partial file was removed)", job.out.display())));
         }
     };
-    std::fs::rename(&partial, &job.out).with_context(|| format!("renaming to {}", job.out.display()))?;
+    std::fs::rename(&partial, &out).with_context(|| format!("renaming to {}", out.display()))?;
     Ok(ConvertSummary { written, skipped, interrupted })
 }
 

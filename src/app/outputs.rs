@@ -75,15 +75,18 @@ pub fn refuse_to_replace(path: &Path, force: bool, note: Option<&str>) -> anyhow
 }
 
 /// Checks, before a long run, that a file can be written at `path` (once the run ends):
-/// `path` is not a folder, its folder exists, and a file can be created there (one is
-/// created and removed). A run's results are then not lost at its end to a mistyped
-/// folder or a missing permission.
+/// `path` is not a folder, the folder of the file it names (through links) exists, and
+/// a file can be created there (one is created and removed). A run's results are then
+/// not lost at its end to a mistyped folder or a missing permission. A device or pipe
+/// (`/dev/stdout`) is written to as it is: nothing is created beside it.
 pub fn check_writable(path: &Path) -> std::io::Result<()> {
+    use crate::io::atomic::{Destination, destination};
     use std::io::{Error, ErrorKind};
-    if path.is_dir() {
-        return Err(Error::new(ErrorKind::IsADirectory, "is a folder"));
-    }
-    let folder = folder_of(path);
+    let file = match destination(path)? {
+        Destination::File(file) => file,
+        Destination::Stream => return Ok(()),
+    };
+    let folder = folder_of(&file);
     if !folder.is_dir() {
         return Err(Error::new(ErrorKind::NotFound, format!("folder {} does not exist", folder.display())));
     }

@@ -93,7 +93,9 @@ impl Recorder {
         }
         let note = "it may be the recording of an earlier run";
         super::outputs::refuse_to_replace(&options.path, options.force, Some(note))?;
-        let partial = crate::io::atomic::partial_path(&options.path);
+        let path = crate::io::atomic::file_destination(&options.path)
+            .with_context(|| format!("recording to {}", options.path.display()))?;
+        let partial = crate::io::atomic::partial_path(&path);
         if partial.exists() && !options.force {
             return Err(anyhow!(
                 "{} exists: a recording that a crash left (`mrsmap replay` reads it up to where it ends); \
@@ -114,7 +116,7 @@ impl Recorder {
             free_tx.send(Slot::new(max_pixels, names.len())).map_err(|_| anyhow!("recorder slots"))?;
         }
         let names = names.to_vec();
-        let (path, last_ns) = (options.path.clone(), options.last_seconds.map(|s| (s * 1e9) as u64));
+        let last_ns = options.last_seconds.map(|s| (s * 1e9) as u64);
         let writer = std::thread::Builder::new()
             .name("mrsmap-recorder".into())
             .spawn(move || {

@@ -75,14 +75,19 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
     if job.every == 0 {
         bail!("--every must be at least 1");
     }
-    if let Some(out) = &job.out {
-        super::outputs::refuse_to_replace(out, job.force, None)?;
-        // (The command line checks every output against every input before; this guards
-        // the library's callers. A missing input is reported by the reader, naming it.)
-        if super::outputs::same_file(out, &job.input) {
-            bail!("--out {} is the input recording", out.display());
+    let out = match &job.out {
+        Some(out) => {
+            super::outputs::refuse_to_replace(out, job.force, None)?;
+            // (The command line checks every output against every input before; this
+            // guards the library's callers. A missing input is reported by the reader,
+            // naming it.)
+            if super::outputs::same_file(out, &job.input) {
+                bail!("--out {} is the input recording", out.display());
+            }
+            Some(crate::io::atomic::file_destination(out).with_context(|| format!("--out {}", out.display()))?)
         }
-    }
+        None => None,
+    };
     let started = Instant::now();
     let mut reader = RecordingReader::open(&job.input, job.topics.clone(), job.camera)?;
     let depth_count = reader.depth_count();
@@ -106,7 +111,7 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
     let names: Vec<String> = config.objects.iter().map(|o| o.name.clone()).collect();
     // Written next to the target and renamed when finished, also after an error, so
     // the poses computed before it are kept.
-    let partial = job.out.as_deref().map(crate::io::atomic::partial_path);
+    let partial = out.as_deref().map(crate::io::atomic::partial_path);
     let mut output = match &partial {
         Some(p) => {
             let mut file = McapFile::create(p, mcap::Compression::Zstd, DEFAULT_CHUNK_BYTES)
@@ -137,7 +142,7 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
     // Every output is tried whatever became of the others (a full disk): the poses
     // tracked so far reach the trajectories even when the MCAP output failed.
     let mut written = result;
-    if let (Some((file, _)), Some(partial), Some(out)) = (output, &partial, &job.out) {
+    if let (Some((file, _)), Some(partial), Some(out)) = (output, &partial, &out) {
         let finished = file
             .finish()
             .map_err(anyhow::Error::from)

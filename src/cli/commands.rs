@@ -293,7 +293,8 @@ fn plot_title(metric: &str, est: &Path, gt: &Path) -> String {
 }
 
 fn write_plot(path: &Path, svg: &str) -> Result<()> {
-    std::fs::write(path, svg).with_context(|| format!("writing the plot {}", path.display()))?;
+    mrsmap::io::atomic::write_whole(path, svg.as_bytes())
+        .with_context(|| format!("writing the plot {}", path.display()))?;
     println!("plot: {}", path.display());
     Ok(())
 }

@@ -145,14 +145,16 @@ fn write_png(
     bytes: &[u8],
 ) -> Result<(), ImageError> {
     let write_err = |message: String| ImageError::Write { path: path.to_path_buf(), message };
-    let file = std::fs::File::create(path).map_err(|e| write_err(e.to_string()))?;
-    let mut encoder = png::Encoder::new(std::io::BufWriter::new(file), width, height);
+    // Encoded whole first, then written whole or not at all (`io::atomic`).
+    let mut png_bytes = Vec::new();
+    let mut encoder = png::Encoder::new(&mut png_bytes, width, height);
     encoder.set_color(color);
     encoder.set_depth(depth);
     let enc_err = |e: png::EncodingError| write_err(e.to_string());
     let mut writer = encoder.write_header().map_err(enc_err)?;
     writer.write_image_data(bytes).map_err(enc_err)?;
-    writer.finish().map_err(enc_err)
+    writer.finish().map_err(enc_err)?;
+    super::atomic::write_whole(path, &png_bytes).map_err(|e| write_err(e.to_string()))
 }
 
 /// Writes an 8-bit RGB image as PNG (for pictures of maps and plots).
