@@ -299,6 +299,16 @@ fn eval_offset_shifts_the_estimate_stamps() {
         let text = String::from_utf8_lossy(&out.stdout);
         assert!(text.contains("rmse   0.0000 mm"), "{metric}: {text}");
     }
+    // Poses out of time order are paired as they come (as evo does), and said.
+    let reversed = dir.join("reversed.txt");
+    std::fs::write(&reversed, text.lines().rev().map(|l| format!("{l}\n")).collect::<String>()).expect("write");
+    let out = mrsmap(&["eval", "rpe", path_str(&gt), path_str(&reversed)]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success() && err.contains("reversed.txt: pose 2 (stamp ") && err.contains("as evo does"),
+        "{err}"
+    );
+    assert!(!err.contains("groundtruth.txt: pose"), "the ground truth is in order: {err}");
     let out = mrsmap(&["eval", "ate", path_str(&gt), path_str(&late), "--offset", "inf"]);
     assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("--offset must be a finite number"));

@@ -305,8 +305,29 @@ fn read_associated(gt: &Path, est: &Path, a: &AssociationArgs) -> Result<Associa
     anyhow::ensure!(a.offset.is_finite(), "--offset must be a finite number of seconds, not {}", a.offset);
     let reference = Trajectory::read(gt)?;
     let mut estimate = Trajectory::read(est)?;
+    warn_if_out_of_order(gt, &reference);
+    warn_if_out_of_order(est, &estimate);
     estimate.stamps.iter_mut().for_each(|t| *t += a.offset);
     Ok(associate_stamped(&reference, &estimate, a.max_diff)?)
+}
+
+/// Says so when a trajectory's stamps are not strictly increasing (a camera driver that
+/// looped its sequence, two runs written into one file): the TUM benchmark's scripts
+/// would sort such a file and keep one pose per stamp, evo (and this tool) pair the poses
+/// in the file's order, and the two give different numbers.
+fn warn_if_out_of_order(path: &Path, trajectory: &Trajectory) {
+    let stamps = &trajectory.stamps;
+    if let Some(k) = stamps.windows(2).position(|w| w[1] <= w[0]) {
+        eprintln!(
+            "warning: {}: pose {} (stamp {:.6}) is not after pose {} (stamp {:.6}); the poses are paired in the \
+             file's order, as evo does (the TUM benchmark's scripts would sort them and keep one pose per stamp)",
+            path.display(),
+            k + 2,
+            stamps[k + 1],
+            k + 1,
+            stamps[k]
+        );
+    }
 }
 
 /// `mrsmap bench`.
