@@ -196,6 +196,18 @@ pub fn parse_tracker_config(text: &str, origin: &Path) -> Result<TrackerConfig, 
     let base = origin.parent().unwrap_or(Path::new("."));
     let objects =
         raw.object.into_iter().map(|o| object(o, base)).collect::<Result<Vec<_>, String>>().map_err(invalid)?;
+    // A pose carries its object's name, and the trajectory files are named by it: two
+    // objects of one name could not be told apart.
+    for (k, o) in objects.iter().enumerate() {
+        if let Some(j) = objects[..k].iter().position(|earlier| earlier.name == o.name) {
+            return Err(invalid(format!(
+                "objects {} and {} are both named {:?}: each object needs its own name (its poses and trajectory file carry it)",
+                j + 1,
+                k + 1,
+                o.name
+            )));
+        }
+    }
     if raw.poses.service.is_empty() {
         return Err(invalid("poses.service is empty".into()));
     }
@@ -276,6 +288,9 @@ mod tests {
         assert!(parse_tracker_config(&unknown, p).unwrap_err().to_string().contains("lamda"));
         let bad_q = GOOD.replace("[camera]", "[tracker]\nmin_quality = 3.0\n[camera]");
         assert!(parse_tracker_config(&bad_q, p).unwrap_err().to_string().contains("min_quality"));
+        let twice = format!("{GOOD}{}", &GOOD[GOOD.find("[[object]]").expect("an object")..]);
+        let err = parse_tracker_config(&twice, p).unwrap_err().to_string();
+        assert!(err.contains("objects 1 and 2 are both named \"teddy\""), "{err}");
         let none = "[camera]\nservice = \"cam\"\n";
         assert!(parse_tracker_config(none, p).unwrap_err().to_string().contains("no [[object]]"));
     }
