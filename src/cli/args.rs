@@ -274,8 +274,8 @@ pub struct BenchArgs {
     /// Camera file.
     #[arg(long)]
     pub camera: PathBuf,
-    /// Number of frames to use (default: up to 200, all of the teddy sequence).
-    #[arg(long, default_value_t = 200)]
+    /// Number of frames to use, at least 2 (default: up to 200, all of the teddy sequence).
+    #[arg(long, default_value_t = 200, value_parser = at_least_two)]
     pub frames: usize,
     /// Passes over the frames.
     #[arg(long, default_value_t = 3, value_parser = at_least_one::<usize>)]
@@ -486,6 +486,15 @@ where
 {
     match text.parse::<T>() {
         Ok(n) if n == T::from(0) => Err("must be at least 1".into()),
+        Ok(n) => Ok(n),
+        Err(e) => Err(e.to_string()),
+    }
+}
+
+/// A frame count of at least 2 (the benchmark registers each frame to the one before).
+fn at_least_two(text: &str) -> Result<usize, String> {
+    match text.parse::<usize>() {
+        Ok(n) if n < 2 => Err("must be at least 2 (each frame is registered to the one before)".into()),
         Ok(n) => Ok(n),
         Err(e) => Err(e.to_string()),
     }
