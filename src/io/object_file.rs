@@ -3,8 +3,10 @@
 //! ```toml
 //! name = "teddy"
 //! [volume]
-//! # A prism: footprint corners roughly on the support surface (world frame, m) and the
-//! # height range above the support plane, which is fitted to the data.
+//! # A prism: footprint corners roughly on the support surface (world frame, m), in
+//! # order around the outline, and the height range above the support plane, which is
+//! # fitted to the data. Corners on one line, or out of order so that edges cross, are
+//! # refused when the file is read, before any mapping.
 //! footprint = [[-1.93, -0.21, 1.0], [-1.33, -0.21, 1.0], [-1.33, 0.28, 1.0]]
 //! min_height_m = 0.015
 //! max_height_m = 0.6
@@ -79,6 +81,7 @@ pub fn parse_object(text: &str, origin: &Path) -> Result<ObjectSpec, ObjectFileE
             if footprint.len() < 3 || !footprint.iter().all(|c| finite(c)) {
                 return Err(invalid("volume.footprint needs at least 3 finite [x, y, z] corners".into()));
             }
+            crate::slam::volume::check_footprint(&footprint).map_err(|e| invalid(format!("volume.footprint: {e}")))?;
             if !(min.is_finite() && max.is_finite() && min < max) {
                 return Err(invalid(format!("volume height range [{min}, {max}] m is empty")));
             }

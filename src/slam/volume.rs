@@ -18,7 +18,7 @@ use thiserror::Error;
 #[derive(Debug, Error, Clone, PartialEq)]
 pub enum VolumeError {
     /// The footprint has fewer than three corners or no area.
-    #[error("the footprint needs at least 3 corners spanning an area")]
+    #[error("the footprint needs at least 3 corners spanning an area of 1 cm² or more, not all on one line")]
     BadFootprint,
     /// Too few measured points near the footprint to fit the support plane.
     #[error("only {found} measured points near the footprint (need {needed}) to fit the support plane")]
@@ -28,6 +28,11 @@ pub enum VolumeError {
         /// Points needed.
         needed: usize,
     },
+    /// Two edges of the footprint cross: its corners are not in order around it.
+    #[error(
+        "the footprint's edges from corner {0} and from corner {1} cross: list the corners in order around the outline"
+    )]
+    CrossingEdges(usize, usize),
     /// The heights are not a range.
     #[error("height range [{min}, {max}] m is empty")]
     BadHeights {
@@ -110,6 +115,45 @@ pub struct Plane {
     pub normal: Vector3<f64>,
     /// Offset.
     pub d: f64,
+}
+
+/// The least area of a footprint (m²): 1 cm².
+const MIN_FOOTPRINT_AREA_M2: f64 = 1e-4;
+
+/// Checks a footprint before any mapping: at least three corners that span an area
+/// (not all on one line), in order around the outline (no two edges cross, as when two
+/// corners are swapped). Corners are numbered from 1 in errors.
+pub fn check_footprint(footprint: &[[f64; 3]]) -> Result<(), VolumeError> {
+    let corners: Vec<Vector3<f64>> = footprint.iter().map(|c| Vector3::new(c[0], c[1], c[2])).collect();
+    let k = corners.len();
+    if k < 3 {
+        return Err(VolumeError::BadFootprint);
+    }
+    // Newell's normal: twice the polygon's vector area (a bow tie's lobes cancel in it).
+    let normal: Vector3<f64> = (0..k).map(|i| corners[i].cross(&corners[(i + 1) % k])).sum();
+    let area = 0.5 * normal.norm();
+    if area.is_nan() || area < MIN_FOOTPRINT_AREA_M2 {
+        return Err(VolumeError::BadFootprint);
+    }
+    let (u, v) = plane_axes(&normal.normalize(), &(corners[1] - corners[0]));
+    let q: Vec<[f64; 2]> = corners.iter().map(|c| [c.dot(&u), c.dot(&v)]).collect();
+    let edge = |i: usize| (q[i], q[(i + 1) % k]);
+    for i in 0..k {
+        // Edges that share a corner with edge i meet there; the others must not meet.
+        for j in i + 2..k {
+            if (j + 1) % k != i && segments_cross(edge(i), edge(j)) {
+                return Err(VolumeError::CrossingEdges(i + 1, j + 1));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Whether two segments in the plane cross (each one's ends strictly on either side of
+/// the other's line).
+fn segments_cross((a, b): ([f64; 2], [f64; 2]), (c, d): ([f64; 2], [f64; 2])) -> bool {
+    let side = |p: [f64; 2], q: [f64; 2], r: [f64; 2]| (q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0]);
+    side(a, b, c) * side(a, b, d) < 0.0 && side(c, d, a) * side(c, d, b) < 0.0
 }
 
 /// Fits the support plane to `points` (world frame) near the footprint: RANSAC for the
@@ -294,6 +338,24 @@ mod tests {
         assert!(!v.shape.contains(&on_plane.coords), "the support surface itself is outside");
         let outside = v.world_from_object.inverse() * Point3::new(0.45, 0.0, 1.2);
         assert!(!v.shape.contains(&outside.coords));
+    }
+
+    #[test]
+    fn footprints_on_a_line_or_with_crossing_edges_are_refused() {
+        let square = [[0.0, 0.0, 1.0], [0.5, 0.0, 1.0], [0.5, 0.4, 1.1], [0.0, 0.4, 1.1]];
+        assert_eq!(check_footprint(&square), Ok(()));
+        assert_eq!(check_footprint(&square[..3]), Ok(()), "a triangle");
+        let line = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]];
+        assert_eq!(check_footprint(&line), Err(VolumeError::BadFootprint));
+        assert_eq!(check_footprint(&square[..2]), Err(VolumeError::BadFootprint));
+        // Corners 2 and 3 swapped: a bow tie whose lobes cancel (no area), and one whose
+        // lobes do not.
+        let bow_tie = [square[0], square[2], square[1], square[3]];
+        assert_eq!(check_footprint(&bow_tie), Err(VolumeError::BadFootprint));
+        let uneven = [[0.0, 0.0, 0.0], [1.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.3, 0.0]];
+        assert_eq!(check_footprint(&uneven), Err(VolumeError::CrossingEdges(1, 3)));
+        let msg = VolumeError::CrossingEdges(1, 3).to_string();
+        assert!(msg.contains("corner 1 and from corner 3 cross"), "{msg}");
     }
 
     #[test]
