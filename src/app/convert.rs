@@ -88,7 +88,12 @@ pub fn run(job: &ConvertJob) -> Result<ConvertSummary> {
     let frames: Vec<_> =
         dataset.frames.iter().skip(job.first_frame).take(job.max_frames.unwrap_or(usize::MAX)).collect();
     if frames.is_empty() {
-        bail!("no frames to convert in {}", job.dataset.display());
+        bail!(
+            "no frames to convert in {} (the dataset has {}, --first-frame {})",
+            job.dataset.display(),
+            dataset.frames.len(),
+            job.first_frame
+        );
     }
     // Written next to the target and renamed at the end: a failed run leaves no half
     // file; an interrupted one a finished file of the frames so far.
