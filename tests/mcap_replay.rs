@@ -340,6 +340,16 @@ fn bad_recordings_give_errors_naming_topic_and_message() {
     let e = first_error(&unknown, None).to_string();
     assert!(e.contains("topic /camera/depth/image_raw, message 0") && e.contains("'yuv422'"), "{e}");
 
+    // A topic the recording does not have is said at once, with the topics it has.
+    let topics = RecordingTopics { color: "/camera/rgb/image_color".into(), ..RecordingTopics::default() };
+    let e = RecordingReader::open(&unknown, topics, None).expect_err("no such topic");
+    let text = e.to_string();
+    assert!(matches!(e, RecordingError::NoSuchTopic { what: "colour", .. }), "{text}");
+    assert!(
+        text.contains("--color-topic") && text.contains("/camera/color/image_raw (sensor_msgs/msg/Image)"),
+        "{text}"
+    );
+
     let no_info = dir.join("no_info.mcap");
     write_custom(&no_info, false, |b| {
         mm_depth(b, W, H);

@@ -213,6 +213,8 @@ pub struct McapSource {
     source: Source,
     mode: ReadMode,
     counts: HashMap<String, u64>,
+    /// Every channel's topic and schema name, sorted, when the file has a summary.
+    channels: Option<Vec<(String, String)>>,
     skipped: Vec<String>,
     done: bool,
 }
@@ -262,6 +264,16 @@ impl McapSource {
                 }
             }
         }
+        let channels = summary.as_ref().map(|s| {
+            let mut all: Vec<(String, String)> = s
+                .channels
+                .values()
+                .map(|c| (c.topic.clone(), c.schema.as_ref().map_or_else(String::new, |schema| schema.name.clone())))
+                .collect();
+            all.sort();
+            all.dedup();
+            all
+        });
         let topics: Vec<String> = topics.iter().map(|t| t.to_string()).collect();
         // An index the reader refuses (a chunk larger than any we read) counts as damaged.
         let indexed = summary.and_then(|s| Indexed::reader(&s, &topics).ok().map(|reader| (s, reader)));
@@ -276,7 +288,13 @@ impl McapSource {
             Source::Indexed(_) => ReadMode::Indexed,
             Source::Streamed(_) => ReadMode::Streamed,
         };
-        Ok(McapSource { source, mode, counts, skipped: Vec::new(), done: false })
+        Ok(McapSource { source, mode, counts, channels, skipped: Vec::new(), done: false })
+    }
+
+    /// Every channel's topic and schema name (sorted), if the file has a summary, which
+    /// lists them all; `None` for a file read as a stream.
+    pub fn channels(&self) -> Option<&[(String, String)]> {
+        self.channels.as_deref()
     }
 
     /// How the file is read.

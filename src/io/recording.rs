@@ -70,6 +70,22 @@ pub enum RecordingError {
         /// What is wrong.
         reason: String,
     },
+    /// A chosen topic is not in the recording (its summary lists every topic).
+    #[error(
+        "{path}: no {what} topic {topic:?} in the recording (give the right one with --{flag}); its topics: {available}"
+    )]
+    NoSuchTopic {
+        /// The file.
+        path: PathBuf,
+        /// What the topic was to carry: "colour", "depth", "calibration".
+        what: &'static str,
+        /// The option that names it (`color-topic`, ...).
+        flag: &'static str,
+        /// The topic asked for.
+        topic: String,
+        /// The recording's topics with their schemas.
+        available: String,
+    },
     /// Images arrived before any calibration.
     #[error(
         "topic {topic}, message {index}: no camera calibration (CameraInfo) on {camera_info_topic} before it; name the calibration topic or give --camera"
@@ -166,6 +182,38 @@ enum Role {
     CameraInfo,
 }
 
+/// Checks that the chosen topics are among a recording's `channels` (topic, schema);
+/// the calibration topic only if it is read (`needs_calibration`: no camera given).
+fn check_topics(
+    path: &Path,
+    topics: &RecordingTopics,
+    needs_calibration: bool,
+    channels: &[(String, String)],
+) -> Result<(), RecordingError> {
+    let chosen = [
+        ("colour", "color-topic", &topics.color, true),
+        ("depth", "depth-topic", &topics.depth, true),
+        ("calibration", "camera-info-topic", &topics.camera_info, needs_calibration),
+    ];
+    for (what, flag, topic, needed) in chosen {
+        if needed && !channels.iter().any(|(t, _)| t == topic) {
+            let mut available: Vec<String> = channels.iter().take(20).map(|(t, s)| format!("{t} ({s})")).collect();
+            if channels.len() > 20 {
+                available.push(format!("and {} more", channels.len() - 20));
+            }
+            let available = if available.is_empty() { "none".into() } else { available.join(", ") };
+            return Err(RecordingError::NoSuchTopic {
+                path: path.to_path_buf(),
+                what,
+                flag,
+                topic: topic.clone(),
+                available,
+            });
+        }
+    }
+    Ok(())
+}
+
 fn message_error(topic: &str, index: u64, reason: impl Into<String>) -> RecordingError {
     RecordingError::Message { topic: topic.to_string(), index, reason: reason.into() }
 }
@@ -181,6 +229,9 @@ impl RecordingReader {
             mcap::McapError::Io(source) => RecordingError::Unreadable { path: path.to_path_buf(), source },
             source => RecordingError::Open { path: path.to_path_buf(), source },
         })?;
+        if let Some(channels) = source.channels() {
+            check_topics(path, &topics, camera.is_none(), channels)?;
+        }
         Ok(RecordingReader {
             source,
             topics,
