@@ -423,6 +423,16 @@ fn a_truncated_recording_replays_up_to_the_damage() {
     assert!(stdout.contains("damaged") && stdout.contains(&format!("{frames} tracked")), "{stdout}");
     let lines = std::fs::read_to_string(dir.join("cut.txt")).expect("trajectory");
     assert_eq!(lines.lines().filter(|l| !l.starts_with('#')).count(), frames);
+    // Streamed, a mistyped topic cannot be found out before reading: it is said after.
+    let out = std::process::Command::new(mrsmap_bin())
+        .args(["replay", "--color-topic", "/nope", "--input"])
+        .arg(&cut)
+        .arg("--config")
+        .arg(&config)
+        .output()
+        .expect("runs");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("warning: no message on the colour topic /nope (named by --color-topic)"), "{stdout}");
 }
 
 #[test]

@@ -127,7 +127,14 @@ fn open_recording(
     // The first frame's size decides the wire type: VGA (or QVGA with --qvga, halved),
     // or a QVGA recording as it is.
     let mut probe = open()?;
-    let first = probe.next_frame()?.with_context(|| format!("{}: no RGB-D frame in the recording", path.display()))?;
+    let first = probe.next_frame()?.with_context(|| {
+        format!(
+            "{}: no RGB-D frame in the recording (colour topic {}, depth topic {})",
+            path.display(),
+            topics.color,
+            topics.depth
+        )
+    })?;
     let (size, half) = match ((first.camera.width, first.camera.height), job.qvga) {
         ((640, 480), false) => (FrameSize::Vga, false),
         ((640, 480), true) => (FrameSize::Qvga, true),

@@ -50,6 +50,8 @@ pub struct ReplayJob {
 pub struct ReplaySummary {
     /// How the file was read.
     pub mode: ReadMode,
+    /// The topics read.
+    pub topics: RecordingTopics,
     /// Messages and frames read.
     pub stats: RecordingStats,
     /// Frames tracked.
@@ -162,6 +164,7 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
     written?;
     Ok(ReplaySummary {
         mode: reader.mode(),
+        topics: reader.topics().clone(),
         stats: reader.stats(),
         tracked_frames: state.frames,
         objects: names.into_iter().zip(state.statuses).zip(state.track_ms).map(|((n, s), t)| (n, s, t)).collect(),
@@ -302,6 +305,16 @@ pub fn print_summary(s: &ReplaySummary) {
                 (s.tracked_frames - 1) as f64 / (s.seconds - startup),
                 startup * 1e3
             );
+        }
+    }
+    // A recording without a summary is streamed: a topic it lacks shows only here.
+    let images = [
+        ("colour", "--color-topic", &s.topics.color, s.stats.color),
+        ("depth", "--depth-topic", &s.topics.depth, s.stats.depth),
+    ];
+    for (what, flag, topic, messages) in images {
+        if messages == 0 && s.damage.as_ref().is_none_or(|d| d.messages_before > 0) {
+            println!("warning: no message on the {what} topic {topic} (named by {flag}): no frame could be paired");
         }
     }
     for chunk in &s.skipped_chunks {
