@@ -160,11 +160,11 @@ fn segments_cross((a, b): ([f64; 2], [f64; 2]), (c, d): ([f64; 2], [f64; 2])) ->
 /// plane with most points within 1 cm among those within 10 cm of the footprint's own
 /// plane and inside its (enlarged) outline, considering only planes within 30° of the
 /// footprint's plane (a box's side wall can hold more points than its top), then a
-/// least-squares refinement on the inliers. Repeatable (seeded).
+/// least-squares refinement on the inliers. Repeatable (seeded). A footprint that
+/// [`check_footprint`] refuses is an error.
 pub fn fit_support_plane(footprint: &[[f64; 3]], points: &[Vector3<f64>]) -> Result<Plane, VolumeError> {
-    if footprint.len() < 3 {
-        return Err(VolumeError::BadFootprint);
-    }
+    // The same check as an object file's when it is read, for any caller.
+    check_footprint(footprint)?;
     let corners: Vec<Vector3<f64>> = footprint.iter().map(|c| Vector3::new(c[0], c[1], c[2])).collect();
     let rough = least_squares_plane(&corners).ok_or(VolumeError::BadFootprint)?;
     let (u, v) = plane_axes(&rough.normal, &(corners[1] - corners[0]));
