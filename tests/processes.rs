@@ -199,6 +199,10 @@ fn bad_frames_are_reported_invalid_and_a_killed_driver_is_survived() {
     assert_eq!(send(&|f| f.depth.fill(0)), status::INVALID_FRAME, "all-zero depth");
     assert_eq!(send(&|_| {}), status::TRACKING, "tracking resumes");
     drop(driver);
+    // A client writing the poses, killed below: what it received is on disk.
+    let kept = dir.join("kept.txt");
+    let (client, client_err) = start(&["poses", "--service", &config.poses_service, "--out", path(&kept), "--quiet"]);
+    wait_for(&client_err, "reading", 30);
     // A real driver, killed mid-stream and restarted: the tracker keeps going.
     let (clip, camera_file) = (teddy_clip(), fr3_camera_file());
     let camera_args = [
@@ -225,6 +229,17 @@ fn bad_frames_are_reported_invalid_and_a_killed_driver_is_survived() {
     assert!(after.publish_stamp_ns > before, "poses resume after the driver restarts");
     assert_eq!(after.status, status::TRACKING);
     drop(camera);
+    signal(&client.0, "KILL");
+    drop(client);
+    let partial = dir.join("kept.txt.partial");
+    let poses = Trajectory::read(&partial).expect("a killed client leaves a TUM trajectory");
+    assert!(poses.poses.len() >= 10, "{} poses kept", poses.poses.len());
+    let again = Command::new(mrsmap_bin())
+        .args(["poses", "--service", &config.poses_service, "--out", path(&kept), "--timeout", "1"])
+        .output()
+        .expect("runs");
+    let err = String::from_utf8_lossy(&again.stderr);
+    assert!(!again.status.success() && err.contains("kept.txt.partial exists") && err.contains("--force"), "{err}");
     signal(&tracker.0, "INT");
     let (code, out) = finish(tracker, 30);
     assert_eq!(code, Some(0), "clean shutdown on SIGINT: {out}");

@@ -13,6 +13,7 @@ pub mod model_cmd;
 pub mod odometry;
 pub mod outputs;
 pub mod plot;
+pub mod pose_files;
 pub mod poses_client;
 pub mod quality_eval;
 pub mod read_ahead;

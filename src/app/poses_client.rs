@@ -2,7 +2,8 @@
 //! and optionally writes TUM trajectories — the example a robot integrator copies.
 
 use super::interrupt::Interrupted;
-use super::report::{RECENT_SAMPLES, both_written, log_line, percentile, push_recent, write_bytes_or_rescue};
+use super::pose_files::PoseFiles;
+use super::report::{RECENT_SAMPLES, log_line, percentile, push_recent};
 use crate::geometry::Pose;
 use crate::io::ipc::{self, IpcError, now_ns};
 use crate::io::tum::{format_pose_line, format_stamp};
@@ -12,7 +13,6 @@ use iceoryx2::node::Node;
 use iceoryx2::service::port_factory::PortFactory as _;
 use nalgebra::{Quaternion, Translation3, UnitQuaternion};
 use std::collections::BTreeMap;
-use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
@@ -22,8 +22,11 @@ pub struct PosesJob {
     /// The pose service.
     pub service: String,
     /// Write `object_from_camera` per object as a TUM trajectory here (with several
-    /// objects, `.<name>` is inserted before the extension).
+    /// objects, `.<name>` is inserted before the extension), as the poses arrive
+    /// ([`PoseFiles`]).
     pub out: Option<PathBuf>,
+    /// Replace the `.partial` trajectories that a client stopped before its end left.
+    pub force: bool,
     /// Stop after this many pose messages.
     pub count: Option<u64>,
     /// Stop after this long without a pose.
@@ -77,25 +80,39 @@ fn status_name(s: u32) -> &'static str {
 pub fn run(job: &PosesJob) -> Result<PosesSummary> {
     ipc::check_service_name(&job.service)?;
     let node = ipc::node("mrsmap_poses")?;
-    let mut reading = Reading { summary: PosesSummary::default(), trajectories: BTreeMap::new(), last: Instant::now() };
+    let files = job.out.as_deref().map(|out| PoseFiles::new(out, job.force)).transpose()?;
+    let mut reading = Reading { summary: PosesSummary::default(), files, last: Instant::now() };
+    let read = read_until_stopped(&node, job, &mut reading);
+    // The trajectories are finished whatever stopped the reading.
+    let written = reading.files.map_or(Ok(()), PoseFiles::finish);
+    match (read, written) {
+        (Err(e), Err(w)) => {
+            log_line(format_args!("poses: {w:#}"));
+            Err(e)
+        }
+        (read, written) => read.and(written).map(|()| reading.summary),
+    }
+}
+
+/// Reads poses until a signal, the count or the timeout, following the tracker through
+/// restarts.
+fn read_until_stopped(node: &Node<ipc::Ipc>, job: &PosesJob, reading: &mut Reading) -> Result<()> {
     let mut found = false;
-    while let Some(service) = wait_for_tracker(&node, job, &reading, found)? {
+    while let Some(service) = wait_for_tracker(node, job, reading, found)? {
         found = true;
-        if read_poses(&node, job, &service, &mut reading)? == Stop::Done {
+        if read_poses(node, job, &service, reading)? == Stop::Done {
             break;
         }
         log_line(format_args!("poses: the tracker stopped; waiting for it to come back on {}", job.service));
     }
-    if let Some(out) = &job.out {
-        write_trajectories(out, &reading.trajectories)?;
-    }
-    Ok(reading.summary)
+    Ok(())
 }
 
 /// What the client has read so far.
 struct Reading {
     summary: PosesSummary,
-    trajectories: BTreeMap<String, String>,
+    /// The trajectories, with `--out`.
+    files: Option<PoseFiles>,
     /// When the last pose (or the start) was.
     last: Instant,
 }
@@ -166,10 +183,13 @@ fn read_poses(
             }
             seen[k] = pose.publish_stamp_ns;
             reading.last = Instant::now();
-            handle(job, &pose, &mut reading.summary, &mut reading.trajectories);
+            handle(job, &pose, entries.len(), reading);
             if job.count.is_some_and(|c| reading.summary.received >= c) {
                 return Ok(Stop::Done);
             }
+        }
+        if let Some(files) = &mut reading.files {
+            files.write();
         }
         if job.timeout.is_some_and(|t| reading.last.elapsed() > t) {
             return Ok(Stop::Done);
@@ -180,7 +200,9 @@ fn read_poses(
     }
 }
 
-fn handle(job: &PosesJob, p: &ObjectPose, summary: &mut PosesSummary, trajectories: &mut BTreeMap<String, String>) {
+/// Counts, prints and writes one pose of the `objects` the tracker tracks.
+fn handle(job: &PosesJob, p: &ObjectPose, objects: usize, reading: &mut Reading) {
+    let summary = &mut reading.summary;
     if p.layout_version != LAYOUT_VERSION {
         log_line(format_args!(
             "poses: message with layout version {} ignored (expected {LAYOUT_VERSION})",
@@ -219,27 +241,14 @@ fn handle(job: &PosesJob, p: &ObjectPose, summary: &mut PosesSummary, trajectori
             latency_ms
         );
     }
-    if job.out.is_some() {
-        let text = trajectories.entry(name).or_default();
-        if p.status == status::TRACKING {
-            let _ = writeln!(text, "{}", format_pose_line(p.frame_stamp_ns, &pose.inverse()));
+    if let Some(files) = &mut reading.files {
+        let line = if p.status == status::TRACKING {
+            format!("{}\n", format_pose_line(p.frame_stamp_ns, &pose.inverse()))
         } else {
-            let _ = writeln!(text, "# {} {}", format_stamp(p.frame_stamp_ns), status_name(p.status));
-        }
+            format!("# {} {}\n", format_stamp(p.frame_stamp_ns), status_name(p.status))
+        };
+        files.push(&name, objects, &line);
     }
-}
-
-fn write_trajectories(out: &Path, trajectories: &BTreeMap<String, String>) -> Result<()> {
-    // Every object's file is tried, whatever became of the others.
-    let mut written = Ok(());
-    for (name, lines) in trajectories {
-        let path = object_trajectory_path(out, name, trajectories.len());
-        let text = format!(
-            "# mrsmap poses: object_from_camera of '{name}' (the camera in the object frame), stamped with the frames' depth timestamps\n# timestamp tx ty tz qx qy qz qw\n{lines}"
-        );
-        written = both_written(written, write_bytes_or_rescue(&path, text.as_bytes()));
-    }
-    written
 }
 
 /// Where object `name`'s trajectory goes when `objects` objects are tracked: `path`

@@ -25,6 +25,7 @@ use std::collections::VecDeque;
 use std::path::PathBuf;
 use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
 use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
 
 /// Frames in flight between the tracker and the writer thread.
 const SLOTS: usize = 6;
@@ -34,7 +35,8 @@ const SLOTS: usize = 6;
 pub struct RecordOptions {
     /// The file to write.
     pub path: PathBuf,
-    /// Keep only the last this many seconds (by frame stamp), written at the end.
+    /// Keep only the frames received in the last this many seconds (by the tracker's
+    /// clock, before the newest frame), written at the end.
     pub last_seconds: Option<f64>,
     /// Replace `path` if it exists (a live run cannot be recorded again: without this,
     /// an existing file is an error).
@@ -60,11 +62,17 @@ struct PoseSnapshot {
 struct Slot {
     frame: OwnedFrame,
     poses: Vec<PoseSnapshot>,
+    /// When the tracker handed it over (the ring's clock).
+    received: Instant,
 }
 
 impl Slot {
     fn new(pixels: usize, objects: usize) -> Box<Self> {
-        Box::new(Slot { frame: OwnedFrame::with_capacity(pixels), poses: Vec::with_capacity(objects) })
+        Box::new(Slot {
+            frame: OwnedFrame::with_capacity(pixels),
+            poses: Vec::with_capacity(objects),
+            received: Instant::now(),
+        })
     }
 }
 
@@ -88,8 +96,15 @@ impl Recorder {
     /// Creates the file and starts the writer thread; slots hold frames of up to
     /// `max_pixels` and the poses of `names`.
     pub fn start(options: &RecordOptions, names: &[String], max_pixels: usize) -> Result<Self> {
-        if options.last_seconds.is_some_and(|s| !(s.is_finite() && s > 0.0)) {
-            return Err(anyhow!("--record-last must be a positive number of seconds"));
+        let last = match options.last_seconds {
+            None => None,
+            Some(s) if s > 0.0 => {
+                Some(Duration::try_from_secs_f64(s).map_err(|_| anyhow!("--record-last {s:e}: too many seconds"))?)
+            }
+            Some(s) => return Err(anyhow!("--record-last {s}: must be a positive number of seconds")),
+        };
+        if let Some(keep) = last {
+            check_ring_memory(keep, ring_frames(keep), max_pixels)?;
         }
         let note = "it may be the recording of an earlier run";
         super::outputs::refuse_to_replace(&options.path, options.force, Some(note))?;
@@ -116,11 +131,10 @@ impl Recorder {
             free_tx.send(Slot::new(max_pixels, names.len())).map_err(|_| anyhow!("recorder slots"))?;
         }
         let names = names.to_vec();
-        let last_ns = options.last_seconds.map(|s| (s * 1e9) as u64);
         let writer = std::thread::Builder::new()
             .name("mrsmap-recorder".into())
             .spawn(move || {
-                let mut ring = Ring::with_room(last_ns.map_or(0, ring_frames), max_pixels, names.len());
+                let mut ring = Ring::with_room(last.map_or(0, ring_frames), max_pixels, names.len());
                 let mut out = Output { file, frames, poses, names, scratch: Vec::new(), written: 0 };
                 // Wait once now: the channel allocates its waiting state on a thread's first
                 // blocking receive, which must not happen in the middle of a run.
@@ -134,7 +148,7 @@ impl Recorder {
                     ))
                 };
                 for slot in first.into_iter().chain(full_rx.iter()) {
-                    match last_ns {
+                    match last {
                         None => {
                             out.write(&slot).map_err(failed)?;
                             let _ = free_tx.send(slot);
@@ -168,6 +182,7 @@ impl Recorder {
             return;
         };
         slot.frame.copy_from(frame);
+        slot.received = Instant::now();
         slot.poses.clear();
         for (object, e) in out.estimates.iter().enumerate().take(slot.poses.capacity()) {
             if e.status == TrackingStatus::Tracking {
@@ -202,18 +217,49 @@ impl Recorder {
     }
 }
 
-/// The frames of the last `keep_ns` (by stamp), copied out of the slots, with the
-/// buffers of dropped frames kept for reuse: in steady state nothing is allocated.
+/// The frames received in the last `keep` before the newest, copied out of the slots,
+/// with the buffers of dropped frames kept for reuse: in steady state nothing is
+/// allocated. The window is by the tracker's clock, not by the frames' stamps: a driver
+/// whose stamps jump back (one that loops, or restarts on another clock) does not cut
+/// the recording short.
 #[derive(Default)]
 struct Ring {
     frames: VecDeque<Slot>,
     spare: Vec<Slot>,
 }
 
-/// Frames of `keep_ns` at a 30 Hz camera (the ring is allocated for them at start; a
-/// faster camera grows it once to its size).
-fn ring_frames(keep_ns: u64) -> usize {
-    (keep_ns as f64 * 30e-9).ceil() as usize + 1
+/// Refuses a ring of `frames` frames of `pixels` pixels that would take more than half of
+/// the memory available now: the ring is written only at the end, and a tracker killed
+/// for lack of memory would lose all of it (and stop tracking).
+fn check_ring_memory(keep: Duration, frames: usize, pixels: usize) -> Result<()> {
+    // rgb8 and 16-bit depth per pixel.
+    let bytes = frames as f64 * pixels as f64 * 5.0;
+    let Some(available) = available_memory_bytes() else { return Ok(()) };
+    if bytes > 0.5 * available as f64 {
+        return Err(anyhow!(
+            "--record-last {} s would hold about {:.1} GB of frames in memory ({frames} frames at 30 Hz), more than \
+             half of the {:.1} GB available: keep fewer seconds, or record the whole run to disk (--record \
+             without --record-last)",
+            keep.as_secs_f64(),
+            bytes * 1e-9,
+            available as f64 * 1e-9
+        ));
+    }
+    Ok(())
+}
+
+/// `MemAvailable` of `/proc/meminfo` in bytes (Linux), if it can be read.
+fn available_memory_bytes() -> Option<u64> {
+    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}
+
+/// Frames of `keep` at a 30 Hz camera: the ring's buffers, allocated at start (a faster
+/// camera's ring keeps this many frames, a shorter time).
+fn ring_frames(keep: Duration) -> usize {
+    (keep.as_secs_f64() * 30.0).ceil() as usize + 1
 }
 
 impl Ring {
@@ -225,21 +271,25 @@ impl Ring {
         }
     }
 
-    /// Adds a copy of `slot` and drops what is older than `keep_ns` before it; a stamp
-    /// that goes back (a restarted or looping driver) starts the window again.
-    fn keep(&mut self, slot: &Slot, keep_ns: u64) {
-        let stamp_ns = slot.frame.stamp_ns;
-        if self.frames.back().is_some_and(|newest| stamp_ns < newest.frame.stamp_ns) {
-            self.spare.extend(self.frames.drain(..));
-        }
-        while self.frames.front().is_some_and(|oldest| stamp_ns - oldest.frame.stamp_ns > keep_ns) {
+    /// Adds a copy of `slot` and drops what was received more than `keep` before it, and
+    /// the oldest frame when every buffer holds one (a camera faster than the ring was
+    /// sized for: the ring then keeps its last frames, allocating nothing).
+    fn keep(&mut self, slot: &Slot, keep: Duration) {
+        while self.frames.front().is_some_and(|oldest| slot.received.saturating_duration_since(oldest.received) > keep)
+        {
             if let Some(old) = self.frames.pop_front() {
                 self.spare.push(old);
             }
         }
+        if self.spare.is_empty()
+            && let Some(old) = self.frames.pop_front()
+        {
+            self.spare.push(old);
+        }
         let mut copy = self.spare.pop().unwrap_or_else(|| *Slot::new(slot.frame.depth.len(), slot.poses.capacity()));
         copy.frame.clone_from(&slot.frame);
         copy.poses.clone_from(&slot.poses);
+        copy.received = slot.received;
         self.frames.push_back(copy);
     }
 }
@@ -278,19 +328,22 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_ring_keeps_the_last_seconds_and_reuses_buffers() {
-        let mut ring = Ring::default();
+    fn the_ring_keeps_the_last_seconds_received_and_reuses_buffers() {
+        let mut ring = Ring::with_room(4, 2, 1);
         let mut slot = Slot::new(2, 1);
-        let mut add = |second: u64, ring: &mut Ring| {
-            slot.frame.stamp_ns = second * 1_000_000_000;
+        let start = Instant::now();
+        // A frame received at `second`, stamped `stamp`.
+        let mut add = |second: u64, stamp: u64, ring: &mut Ring| {
+            slot.received = start + Duration::from_secs(second);
+            slot.frame.stamp_ns = stamp * 1_000_000_000;
             slot.frame.rgb.clear();
-            slot.frame.rgb.extend([second as u8; 6]);
+            slot.frame.rgb.extend([stamp as u8; 6]);
             slot.frame.depth.clear();
-            slot.frame.depth.extend([second as u16; 2]);
-            ring.keep(&slot, 3_000_000_000);
+            slot.frame.depth.extend([stamp as u16; 2]);
+            ring.keep(&slot, Duration::from_secs(3));
         };
         for second in 0..=10 {
-            add(second, &mut ring);
+            add(second, second, &mut ring);
         }
         let kept = |ring: &Ring| ring.frames.iter().map(|s| s.frame.stamp_ns / 1_000_000_000).collect::<Vec<_>>();
         assert_eq!(kept(&ring), [7, 8, 9, 10]);
@@ -300,15 +353,22 @@ mod tests {
                 .all(|s| u64::from(s.frame.rgb[0]) == s.frame.stamp_ns / 1_000_000_000 && s.frame.depth.len() == 2)
         );
         assert_eq!(ring.frames.len() + ring.spare.len(), 4, "buffers are reused");
-        // The clock goes back (a restarted driver): the window starts again.
-        add(2, &mut ring);
-        assert_eq!(kept(&ring), [2]);
+        // The stamps go back (a driver that loops, or restarts on another clock): the
+        // frames received before are kept all the same.
+        add(11, 2, &mut ring);
+        add(12, 3, &mut ring);
+        assert_eq!(kept(&ring), [9, 10, 2, 3]);
         assert_eq!(ring.frames.len() + ring.spare.len(), 4);
-        // A looping source: 3, 4, then 3 again (before the newest, though not the oldest).
-        add(3, &mut ring);
-        add(4, &mut ring);
-        add(3, &mut ring);
-        assert_eq!(kept(&ring), [3]);
+        // A pause (the driver crashed) and a frame long after: only that frame is within
+        // the window before the newest.
+        add(60, 4, &mut ring);
+        assert_eq!(kept(&ring), [4]);
         assert_eq!(ring.frames.len() + ring.spare.len(), 4);
+        // More frames within the window than buffers (a faster camera): the last ones.
+        for stamp in 5..=10 {
+            add(60, stamp, &mut ring);
+        }
+        assert_eq!(kept(&ring), [7, 8, 9, 10]);
+        assert_eq!(ring.frames.len() + ring.spare.len(), 4, "no buffer added");
     }
 }

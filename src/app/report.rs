@@ -60,13 +60,19 @@ pub fn write_or_rescue(
     write: impl Fn(&std::path::Path) -> anyhow::Result<()>,
 ) -> anyhow::Result<()> {
     let Err(error) = write(path) else { return Ok(()) };
-    let name = path.file_name().map_or_else(|| "output".into(), |n| n.to_string_lossy().into_owned());
-    let rescue = std::env::temp_dir().join(format!("mrsmap-rescued-{}-{name}", std::process::id()));
+    let rescue = rescue_path(path);
     if rescue != path && write(&rescue).is_ok() {
         let said = format!("could not write {}; it was written to {} instead", path.display(), rescue.display());
         return Err(error.context(said));
     }
     Err(error)
+}
+
+/// Where an output named `path` is rescued to: `mrsmap-rescued-<pid>-<name>` in the
+/// system's temporary folder.
+pub fn rescue_path(path: &std::path::Path) -> std::path::PathBuf {
+    let name = path.file_name().map_or_else(|| "output".into(), |n| n.to_string_lossy().into_owned());
+    std::env::temp_dir().join(format!("mrsmap-rescued-{}-{name}", std::process::id()))
 }
 
 /// [`write_or_rescue`] for a file of `bytes`, written whole or not at all

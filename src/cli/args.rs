@@ -129,8 +129,9 @@ pub struct TrackArgs {
     /// mode), finished on Ctrl-C/SIGTERM; `mrsmap replay` reads it.
     #[arg(long, conflicts_with = "dataset")]
     pub record: Option<PathBuf>,
-    /// Keep only the last this many seconds in the recording (held in memory, about
-    /// 55 MB per second of VGA at 30 Hz, allocated at start, and written at the end).
+    /// Keep only the frames received in the last this many seconds in the recording
+    /// (held in memory, about 46 MB per second of VGA at 30 Hz, 5 bytes a pixel, allocated at start, and
+    /// written at the end; refused if that is more than half of the memory available).
     #[arg(long, requires = "record")]
     pub record_last: Option<f64>,
     /// Replace the --record file if it exists (without it, an existing file is an error:
@@ -168,9 +169,16 @@ pub struct PosesArgs {
     /// The pose service (the tracker config's poses.service).
     #[arg(long, default_value = mrsmap::io::ipc::POSES_SERVICE, value_parser = service_name)]
     pub service: String,
-    /// Write each object's object_from_camera as a TUM trajectory (tracked frames).
+    /// Write each object's object_from_camera as a TUM trajectory (tracked frames; a
+    /// comment line for the others). Written as the poses arrive, into OUT.partial,
+    /// which takes the name OUT when the client stops: a client that is killed leaves
+    /// OUT.partial with every pose it received.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Replace the OUT.partial trajectories that a client stopped before its end left
+    /// (without it they are an error: they hold that run's poses).
+    #[arg(long, requires = "out")]
+    pub force: bool,
     /// Stop after this many pose messages.
     #[arg(long, value_parser = at_least_one::<u64>)]
     pub count: Option<u64>,

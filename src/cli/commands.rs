@@ -202,6 +202,7 @@ pub fn poses(a: PosesArgs) -> Result<()> {
     let job = app::poses_client::PosesJob {
         service: a.service,
         out: a.out,
+        force: a.force,
         count: a.count,
         timeout: seconds(a.timeout, "--timeout")?,
         print: !a.quiet,
