@@ -28,7 +28,7 @@ track() {
   out=$($BIN track --config robot_config/tracker.toml --dataset "$OUT/teddy_rational" --camera "$1" \
     --start-at-ground-truth)
   line=$(echo "$out" | grep "ATE (aligned)" | sed -E 's/^ *camera position error vs ground truth //')
-  TRACKED=$(echo "$out" | sed -nE 's/.* ([0-9]+) frames tracking.*/\1/p')
+  TRACKED=$(echo "$out" | sed -nE 's/.* ([0-9]+) frames tracking \(([0-9]+) held\).*/\1 \2/p' | awk '{print $1 - $2}')
   MEDIAN=$(echo "$line" | sed -E 's/.*ATE \(aligned\) median ([0-9.]+) mm.*/\1/')
   printf 'distorted teddy 100-199, %-29s %s frames tracking, %s\n' "$2" "$TRACKED" "$line"
 }

@@ -115,7 +115,8 @@ def main() -> int:
         t = list(pose.translation_m)
         print(f"frame {seq}: {name} status {pose.status} quality {pose.quality:.2f} "
               f"camera_from_object t = [{t[0]:+.3f}, {t[1]:+.3f}, {t[2]:+.3f}]")
-        tracked += pose.status == 0
+        # Estimated from this frame: status tracking and no bad frame (else a held pose).
+        tracked += pose.status == 0 and pose.bad_frames == 0
     print(f"{tracked}/{total} frames tracked")
     return 0 if tracked == total else 1
 

@@ -181,6 +181,10 @@ fn bad_frames_are_reported_invalid_and_a_killed_driver_is_survived() {
     let config = read_tracker_config(&config_path).expect("config");
     let (tracker, tracker_err) = start(&["track", "--config", path(&config_path)]);
     wait_for(&tracker_err, "ready", 60);
+    // A client writing the poses, killed below: what it received is on disk.
+    let kept = dir.join("kept.txt");
+    let (client, client_err) = start(&["poses", "--service", &config.poses_service, "--out", path(&kept), "--quiet"]);
+    wait_for(&client_err, "reading", 30);
     let driver = TestDriver::new(&config.camera_service);
     let node = ipc::node("test_reader").expect("node");
     let poses = ipc::open_poses(&node, &config.poses_service).expect("the tracker created the blackboard");
@@ -198,11 +202,17 @@ fn bad_frames_are_reported_invalid_and_a_killed_driver_is_survived() {
     assert_eq!(send(&|f| f.header.width = 320), status::INVALID_FRAME, "a header that disagrees with the message size");
     assert_eq!(send(&|f| f.depth.fill(0)), status::INVALID_FRAME, "all-zero depth");
     assert_eq!(send(&|_| {}), status::TRACKING, "tracking resumes");
+    // A valid frame that does not show the object (a wall 1 m away): the registration
+    // fails, the pose is held (still tracking, one bad frame), and the client's
+    // trajectory says so instead of writing the held pose at this frame's stamp.
+    sequence += 1;
+    driver.send(sequence, |f| f.depth.fill(5000));
+    let held = read_pose(&entry, sequence);
+    assert_eq!((held.status, held.bad_frames, held.is_fresh()), (status::TRACKING, 1, false));
+    sequence += 1;
+    driver.send(sequence, |_| {});
+    assert!(read_pose(&entry, sequence).is_fresh(), "tracking resumes");
     drop(driver);
-    // A client writing the poses, killed below: what it received is on disk.
-    let kept = dir.join("kept.txt");
-    let (client, client_err) = start(&["poses", "--service", &config.poses_service, "--out", path(&kept), "--quiet"]);
-    wait_for(&client_err, "reading", 30);
     // A real driver, killed mid-stream and restarted: the tracker keeps going.
     let (clip, camera_file) = (teddy_clip(), fr3_camera_file());
     let camera_args = [
@@ -234,6 +244,9 @@ fn bad_frames_are_reported_invalid_and_a_killed_driver_is_survived() {
     let partial = dir.join("kept.txt.partial");
     let poses = Trajectory::read(&partial).expect("a killed client leaves a TUM trajectory");
     assert!(poses.poses.len() >= 10, "{} poses kept", poses.poses.len());
+    let text = std::fs::read_to_string(&partial).expect("reads");
+    let held_line = format!("# {} held", mrsmap::io::tum::format_stamp(held.frame_stamp_ns));
+    assert!(text.contains(&held_line), "{held_line} in {text}");
     let again = Command::new(mrsmap_bin())
         .args(["poses", "--service", &config.poses_service, "--out", path(&kept), "--timeout", "1"])
         .output()

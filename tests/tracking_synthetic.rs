@@ -111,16 +111,23 @@ fn tracks_loses_and_reinitialises() {
             e.iterations
         );
         assert_eq!(e.status, TrackingStatus::Tracking, "frame {k}");
+        assert!(e.is_fresh(), "frame {k}: estimated from its frame");
         assert!(mm < 2e-3 && deg < 0.25, "frame {k}: {:.2} mm {:.3}°", mm * 1e3, deg);
         assert!(e.quality > 0.8, "a good fit has quality near 1: {}", e.quality);
         assert!(e.covariance_ros[(0, 0)] > 0.0 && e.covariance_ros[(0, 0)] < 1e-4);
     }
     // The camera turns away: no overlap. Held twice, lost at the third frame.
     let away = render_frame(&mesh, cam, &left_increment(&Vector6::new(0.0, 0.0, 0.0, 0.0, 2.4, 0.0)));
-    let held = step(&mut tracker, &away, 20).camera_from_object;
-    let statuses: Vec<TrackingStatus> = (21..24).map(|k| step(&mut tracker, &away, k).status).collect();
+    let first = step(&mut tracker, &away, 20);
+    let held: Vec<PoseEstimate> = (21..24).map(|k| step(&mut tracker, &away, k)).collect();
+    let statuses: Vec<TrackingStatus> = held.iter().map(|e| e.status).collect();
     assert_eq!(statuses, [TrackingStatus::Tracking, TrackingStatus::Lost, TrackingStatus::Initialising]);
-    assert_eq!(held, last_good, "the pose is held while registrations fail");
+    assert_eq!(first.camera_from_object, last_good, "the pose is held while registrations fail");
+    // Held poses are tracking but not estimated from their frame: trajectories leave
+    // them out.
+    assert_eq!((first.status, first.bad_frames, first.is_fresh()), (TrackingStatus::Tracking, 1, false));
+    assert_eq!((held[0].bad_frames, held[0].is_fresh()), (2, false));
+    assert_eq!(first.covariance_ros, nalgebra::Matrix6::identity(), "a held pose has no covariance of its own");
     // Back near the initial view: a re-initialisation hypothesis catches it.
     let back = render_frame(&mesh, cam, &poses[1]);
     let mut status = TrackingStatus::Initialising;

@@ -127,7 +127,7 @@ pub fn run(job: &DemoJob) -> Result<()> {
             println!(
                 "{:<18} {:<13} [{:+.3}, {:+.3}, {:+.3}] {:>9.2} {:>10.2} {:>10}",
                 format_stamp(p.frame_stamp_ns),
-                if p.status == status::TRACKING { "tracking" } else { "not tracking" },
+                status_label(&p),
                 t[0],
                 t[1],
                 t[2],
@@ -157,6 +157,15 @@ pub fn run(job: &DemoJob) -> Result<()> {
 
 /// Error of the camera position in the object frame against ground truth (m), through
 /// the model's `world_from_model` (no alignment).
+/// A pose's status in the demo's table.
+fn status_label(p: &ObjectPose) -> &'static str {
+    match p.status {
+        _ if p.is_fresh() => "tracking",
+        status::TRACKING => "held",
+        _ => "not tracking",
+    }
+}
+
 fn ground_truth_error(dataset: &TumDataset, world_from_model: &Pose, p: &ObjectPose) -> Option<f64> {
     let gt = dataset.groundtruth.as_ref()?.interpolate(p.frame_stamp_ns as f64 * 1e-9, 0.05)?;
     let truth = world_from_model.inverse() * gt;
@@ -165,7 +174,7 @@ fn ground_truth_error(dataset: &TumDataset, world_from_model: &Pose, p: &ObjectP
 }
 
 fn summarize(dataset: &TumDataset, world_from_model: &Pose, received: &[(ObjectPose, u64)]) {
-    let tracked: Vec<&(ObjectPose, u64)> = received.iter().filter(|(p, _)| p.status == status::TRACKING).collect();
+    let tracked: Vec<&(ObjectPose, u64)> = received.iter().filter(|(p, _)| p.is_fresh()).collect();
     println!("demo: {} poses received, {} tracking", received.len(), tracked.len());
     let track: Vec<f64> = tracked.iter().map(|(p, _)| f64::from(p.build_ms + p.register_ms)).collect();
     let latency: Vec<f64> =

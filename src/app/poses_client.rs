@@ -40,8 +40,9 @@ pub struct PosesJob {
 pub struct PosesSummary {
     /// Pose messages received.
     pub received: u64,
-    /// Per object name: (tracking, lost, initialising, invalid frame) counts.
-    pub by_status: BTreeMap<String, [u64; 4]>,
+    /// Per object name: (tracking, lost, initialising, invalid frame) counts, and of
+    /// those tracking the poses held (no good registration in that frame).
+    pub by_status: BTreeMap<String, [u64; 5]>,
     /// Driver send → pose received (ms), the most recent `RECENT_SAMPLES` poses (of valid frames).
     pub latency_ms: Vec<f64>,
     /// Tracking time reported by the tracker (ms), same poses.
@@ -63,8 +64,10 @@ pub fn object_name(p: &ObjectPose) -> String {
     String::from_utf8_lossy(&p.name[..end]).into_owned()
 }
 
-fn status_name(s: u32) -> &'static str {
-    match s {
+/// The pose's status as said in print and in trajectories: a held pose as "held".
+fn status_name(p: &ObjectPose) -> &'static str {
+    match p.status {
+        status::TRACKING if p.bad_frames > 0 => "held",
         status::TRACKING => "tracking",
         status::LOST => "LOST",
         status::INITIALISING => "initialising",
@@ -213,9 +216,11 @@ fn handle(job: &PosesJob, p: &ObjectPose, objects: usize, reading: &mut Reading)
     summary.received += 1;
     let name = object_name(p);
     let latency_ms = now_ns().saturating_sub(p.frame_send_stamp_ns) as f64 * 1e-6;
-    if let Some(c) = summary.by_status.entry(name.clone()).or_default().get_mut(p.status as usize) {
+    let counts = summary.by_status.entry(name.clone()).or_default();
+    if let Some(c) = counts.get_mut(p.status as usize) {
         *c += 1;
     }
+    counts[4] += u64::from(p.status == status::TRACKING && !p.is_fresh());
     let pose = camera_from_object(p);
     if p.status != status::INVALID_FRAME {
         push_recent(&mut summary.latency_ms, summary.timed, RECENT_SAMPLES, latency_ms);
@@ -228,7 +233,7 @@ fn handle(job: &PosesJob, p: &ObjectPose, objects: usize, reading: &mut Reading)
             "{} {:<8} {:<13} camera_from_object t = [{:+.4}, {:+.4}, {:+.4}] m  q = [{:+.4}, {:+.4}, {:+.4}, {:+.4}]  quality {:.2}  track {:.2} ms  latency {:.2} ms",
             format_stamp(p.frame_stamp_ns),
             name,
-            status_name(p.status),
+            status_name(p),
             t.x,
             t.y,
             t.z,
@@ -242,10 +247,10 @@ fn handle(job: &PosesJob, p: &ObjectPose, objects: usize, reading: &mut Reading)
         );
     }
     if let Some(files) = &mut reading.files {
-        let line = if p.status == status::TRACKING {
+        let line = if p.is_fresh() {
             format!("{}\n", format_pose_line(p.frame_stamp_ns, &pose.inverse()))
         } else {
-            format!("# {} {}\n", format_stamp(p.frame_stamp_ns), status_name(p.status))
+            format!("# {} {}\n", format_stamp(p.frame_stamp_ns), status_name(p))
         };
         files.push(&name, objects, &line);
     }
@@ -283,7 +288,10 @@ fn with_suffix(path: &Path, name: &str) -> PathBuf {
 pub fn print_summary(s: &PosesSummary) {
     println!("poses: {} messages", s.received);
     for (name, c) in &s.by_status {
-        println!("  {name}: {} tracking, {} lost, {} initialising, {} invalid frames", c[0], c[1], c[2], c[3]);
+        println!(
+            "  {name}: {} tracking ({} held), {} lost, {} initialising, {} invalid frames",
+            c[0], c[4], c[1], c[2], c[3]
+        );
     }
     if !s.latency_ms.is_empty() {
         println!(

@@ -20,7 +20,6 @@ use crate::io::frames::FrameLoader;
 use crate::io::tracker_config::TrackerConfig;
 use crate::io::tum::TumDataset;
 use crate::synthetic::Pcg32;
-use crate::tracking::TrackingStatus;
 use anyhow::{Context, Result, bail};
 use nalgebra::{Translation3, UnitQuaternion, Vector6};
 use std::path::PathBuf;
@@ -95,7 +94,7 @@ pub fn run(config: &TrackerConfig, job: &QualityJob) -> Result<Vec<Trial>> {
         let frame = pool.install(|| loader.load(entry))?;
         track_frame(&mut tracker, &pool, &frame, &mut out, Workers::Spin);
         let g = gt.interpolate(entry.depth_stamp_ns as f64 * 1e-9, 0.05);
-        if let (TrackingStatus::Tracking, Some(g)) = (out.estimates[0].status, g) {
+        if let Some(g) = g.filter(|_| out.estimates[0].is_fresh()) {
             estimates.push((entry.clone(), out.estimates[0].camera_from_object.inverse()));
             truths.push(g);
         }

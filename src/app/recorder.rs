@@ -18,7 +18,6 @@ use crate::io::mcap_write::{
     DEFAULT_CHUNK_BYTES, DepthEncoding, FrameChannels, McapFile, ObjectPoseRecord, PoseChannels,
 };
 use crate::io::recording::RecordingTopics;
-use crate::tracking::TrackingStatus;
 use anyhow::{Context, Result, anyhow};
 use nalgebra::Matrix6;
 use std::collections::VecDeque;
@@ -185,7 +184,7 @@ impl Recorder {
         slot.received = Instant::now();
         slot.poses.clear();
         for (object, e) in out.estimates.iter().enumerate().take(slot.poses.capacity()) {
-            if e.status == TrackingStatus::Tracking {
+            if e.is_fresh() {
                 slot.poses.push(PoseSnapshot {
                     object,
                     camera_from_object: e.camera_from_object,

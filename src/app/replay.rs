@@ -56,9 +56,10 @@ pub struct ReplaySummary {
     pub stats: RecordingStats,
     /// Frames tracked.
     pub tracked_frames: usize,
-    /// Per object: name, frames per status (tracking, lost, initialising, invalid), and
-    /// tracking time per frame (ms).
-    pub objects: Vec<(String, [usize; 4], Vec<f64>)>,
+    /// Per object: name, frames per status (tracking, lost, initialising, invalid, and
+    /// of those tracking the ones held: no good registration, the last good pose kept),
+    /// and tracking time per frame (ms).
+    pub objects: Vec<(String, [usize; 5], Vec<f64>)>,
     /// Wall-clock seconds of the whole replay (reading, decoding, tracking, writing).
     pub seconds: f64,
     /// Of these, the seconds until the first frame was tracked (opening the recording,
@@ -128,7 +129,7 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
         rays,
         tracker: None,
         out: StepOutput::new(names.len()),
-        statuses: vec![[0; 4]; names.len()],
+        statuses: vec![[0; 5]; names.len()],
         track_ms: vec![Vec::new(); names.len()],
         tracked: vec![Vec::new(); names.len()],
         frames: 0,
@@ -183,7 +184,7 @@ struct Replay {
     rays: Option<RayTable>,
     tracker: Option<Tracker>,
     out: StepOutput,
-    statuses: Vec<[usize; 4]>,
+    statuses: Vec<[usize; 5]>,
     track_ms: Vec<Vec<f64>>,
     tracked: Vec<Vec<(u64, Pose)>>,
     frames: usize,
@@ -249,10 +250,11 @@ impl Replay {
             for (k, name) in names.iter().enumerate() {
                 let e = &self.out.estimates[k];
                 self.statuses[k][e.status as usize] += 1;
+                self.statuses[k][4] += usize::from(e.status == TrackingStatus::Tracking && !e.is_fresh());
                 if e.status != TrackingStatus::InvalidFrame {
                     self.track_ms[k].push(f64::from(self.out.build_ms[k] + self.out.register_ms[k]));
                 }
-                if e.status == TrackingStatus::Tracking {
+                if e.is_fresh() {
                     self.tracked[k].push((frame.stamp_ns, e.camera_from_object.inverse()));
                     records.push(ObjectPoseRecord {
                         object: k,
@@ -282,8 +284,8 @@ pub fn print_summary(s: &ReplaySummary) {
         "read {} colour, {} depth, {} calibration messages ({mode}); {} frames paired, {} images unpaired; {} tracked",
         s.stats.color, s.stats.depth, s.stats.camera_info, s.stats.frames, s.stats.unpaired, s.tracked_frames
     );
-    for (name, [t, l, i, v], ms) in &s.objects {
-        println!("{name}: {t} frames tracking, {l} lost, {i} initialising, {v} invalid");
+    for (name, [t, l, i, v, h], ms) in &s.objects {
+        println!("{name}: {t} frames tracking ({h} held), {l} lost, {i} initialising, {v} invalid");
         if !ms.is_empty() {
             println!(
                 "  tracking time per frame: median {:.2} ms, p99 {:.2} ms",

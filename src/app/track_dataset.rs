@@ -56,6 +56,8 @@ pub struct ObjectResult {
     pub name: String,
     /// Frames per status (tracking, lost, initialising, invalid).
     pub statuses: [usize; 4],
+    /// Of the frames tracking, those whose registration failed (the pose held).
+    pub held: usize,
     /// Tracking time per frame (ms).
     pub track_ms: Vec<f64>,
     /// Position error of the camera in the object frame after rigid alignment of the
@@ -117,10 +119,11 @@ pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<TrackDataset
         for (k, r) in results.iter_mut().enumerate() {
             let e = &out.estimates[k];
             r.statuses[e.status as usize] += 1;
+            r.held += usize::from(e.status == TrackingStatus::Tracking && !e.is_fresh());
             if e.status != TrackingStatus::InvalidFrame {
                 r.track_ms.push(f64::from(out.build_ms[k] + out.register_ms[k]));
             }
-            if e.status == TrackingStatus::Tracking {
+            if e.is_fresh() {
                 tracked[k].push((entry.depth_stamp_ns, e.camera_from_object.inverse()));
             }
         }
@@ -159,7 +162,7 @@ pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<TrackDataset
 pub fn print_summary(summary: &TrackDatasetSummary) {
     for r in &summary.objects {
         let [t, l, i, v] = r.statuses;
-        println!("{}: {t} frames tracking, {l} lost, {i} initialising, {v} invalid", r.name);
+        println!("{}: {t} frames tracking ({} held), {l} lost, {i} initialising, {v} invalid", r.name, r.held);
         if !r.track_ms.is_empty() {
             println!(
                 "  tracking time per frame: median {:.2} ms, p99 {:.2} ms",

@@ -302,6 +302,14 @@ pub struct ObjectPose {
     pub name: [u8; 32],
 }
 
+impl ObjectPose {
+    /// Whether the pose was estimated from the frame it answers: status tracking with no
+    /// bad frame (with `bad_frames` above 0 it is the last good pose, held).
+    pub fn is_fresh(&self) -> bool {
+        self.status == status::TRACKING && self.bad_frames == 0
+    }
+}
+
 /// A loaned, uninitialised iceoryx2 sample.
 pub type LoanedSample<S, P> = iceoryx2::sample_mut_uninit::SampleMutUninit<S, MaybeUninit<P>, ()>;
 /// A written iceoryx2 sample, ready to send.

@@ -10,7 +10,10 @@ use nalgebra::{Matrix6, Translation3, UnitQuaternion, Vector3};
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[repr(u8)]
 pub enum TrackingStatus {
-    /// The pose was estimated from this frame.
+    /// The object is tracked. With `bad_frames` 0 the pose was estimated from this
+    /// frame ([`PoseEstimate::is_fresh`]); otherwise this frame's registration failed
+    /// and the pose is the last good one, held until `lost_after_frames` failures in a
+    /// row make the status `Lost` (its covariance is then the identity).
     Tracking = 0,
     /// Tracking was lost at this frame; re-initialisation starts with the next one. The
     /// pose is the last good one.
@@ -52,6 +55,13 @@ pub struct PoseEstimate {
 }
 
 impl PoseEstimate {
+    /// Whether the pose was estimated from this frame: tracking, and the frame's
+    /// registration good (not a held pose). Trajectories and recorded poses hold only
+    /// these.
+    pub fn is_fresh(&self) -> bool {
+        self.status == TrackingStatus::Tracking && self.bad_frames == 0
+    }
+
     pub(crate) fn empty(object: usize) -> Self {
         PoseEstimate {
             stamp_ns: 0,
