@@ -169,8 +169,9 @@ pub struct PosesArgs {
     /// The pose service (the tracker config's poses.service).
     #[arg(long, default_value = mrsmap::io::ipc::POSES_SERVICE, value_parser = service_name)]
     pub service: String,
-    /// Write each object's object_from_camera as a TUM trajectory (tracked frames; a
-    /// comment line for the others). Written as the poses arrive, into OUT.partial,
+    /// Write each object's object_from_camera as a TUM trajectory (frames whose pose was
+    /// estimated from them; a comment line for the others: lost, initialising, invalid,
+    /// or held, the last good pose kept through a failed registration). Written as the poses arrive, into OUT.partial,
     /// which takes the name OUT when the client stops: a client that is killed leaves
     /// OUT.partial with every pose it received.
     #[arg(long)]
