@@ -217,7 +217,7 @@ fn handle(job: &PosesJob, p: &ObjectPose, objects: usize, reading: &mut Reading)
     let name = object_name(p);
     let latency_ms = now_ns().saturating_sub(p.frame_send_stamp_ns) as f64 * 1e-6;
     let counts = summary.by_status.entry(name.clone()).or_default();
-    if let Some(c) = counts.get_mut(p.status as usize) {
+    if let Some(c) = counts[..4].get_mut(p.status as usize) {
         *c += 1;
     }
     counts[4] += u64::from(p.status == status::TRACKING && !p.is_fresh());
