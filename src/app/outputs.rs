@@ -96,7 +96,7 @@ pub fn check_writable(path: &Path) -> std::io::Result<()> {
 }
 
 /// The folder `path` is in (`.` for a bare name).
-fn folder_of(path: &Path) -> &Path {
+pub(super) fn folder_of(path: &Path) -> &Path {
     match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),

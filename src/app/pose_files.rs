@@ -192,11 +192,7 @@ fn leftover_partials(out: &Path) -> Vec<PathBuf> {
         Some(ext) => format!(".{}.partial", ext.to_string_lossy()),
         None => ".partial".to_string(),
     };
-    let folder = match out.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
-    let Ok(entries) = std::fs::read_dir(folder) else { return Vec::new() };
+    let Ok(entries) = std::fs::read_dir(super::outputs::folder_of(&out)) else { return Vec::new() };
     let mut left: Vec<PathBuf> = entries
         .filter_map(|e| e.ok())
         .filter(|e| {
