@@ -43,3 +43,6 @@ pub mod registration;
 pub mod slam;
 pub mod synthetic;
 pub mod tracking;
+
+#[cfg(test)]
+mod test_support;

@@ -136,17 +136,11 @@ fn resolved(path: &Path) -> Option<PathBuf> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn scratch(name: &str) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!("mrsmap-outputs-{name}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).expect("a scratch folder");
-        dir
-    }
+    use crate::test_support::scratch_dir;
 
     #[test]
     fn an_output_that_is_an_input_is_refused_through_any_link() {
-        let dir = scratch("input");
+        let dir = scratch_dir("outputs-input");
         let gt = dir.join("groundtruth.txt");
         std::fs::write(&gt, "1 0 0 0 0 0 0 1\n").expect("writes");
         std::fs::create_dir(dir.join("sub")).expect("a folder");
@@ -178,7 +172,7 @@ mod tests {
 
     #[test]
     fn two_outputs_naming_one_file_are_refused_whether_or_not_it_exists() {
-        let dir = scratch("twice");
+        let dir = scratch_dir("outputs-twice");
         let (a, b) = (dir.join("poses.mcap"), dir.join("./poses.mcap"));
         let err = check_outputs([("--out", Some(a.as_path())), ("--trajectory", Some(b.as_path()))], &[])
             .expect_err("the same new file")
@@ -193,7 +187,7 @@ mod tests {
 
     #[test]
     fn an_existing_file_is_replaced_only_with_force() {
-        let dir = scratch("replace");
+        let dir = scratch_dir("outputs-replace");
         let (old, new) = (dir.join("old.mcap"), dir.join("new.mcap"));
         std::fs::write(&old, "").expect("writes");
         let err = refuse_to_replace(&old, false, None).expect_err("exists").to_string();
@@ -207,7 +201,7 @@ mod tests {
 
     #[test]
     fn a_dataset_lists_the_index_files_it_has() {
-        let dir = scratch("dataset");
+        let dir = scratch_dir("outputs-dataset");
         std::fs::write(dir.join("rgb.txt"), "").expect("writes");
         std::fs::write(dir.join("groundtruth.txt"), "").expect("writes");
         let names: Vec<String> = dataset_inputs(&dir).into_iter().map(|(what, _)| what).collect();

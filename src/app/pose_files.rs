@@ -211,17 +211,11 @@ fn leftover_partials(out: &Path) -> Vec<PathBuf> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn temp_dir(tag: &str) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!("mrsmap-pose-files-{tag}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).expect("temp dir");
-        dir
-    }
+    use crate::test_support::scratch_dir;
 
     #[test]
     fn lines_are_on_disk_after_each_write_and_the_file_takes_its_name_at_the_end() {
-        let dir = temp_dir("stream");
+        let dir = scratch_dir("pose-files-stream");
         let out = dir.join("traj.txt");
         let mut files = PoseFiles::new(&out, false).expect("nothing left over");
         files.push("teddy", 2, "1.0 0 0 0 0 0 0 1\n");
@@ -248,7 +242,7 @@ mod tests {
 
     #[test]
     fn lines_that_cannot_be_written_are_kept_and_rescued_whole() {
-        let dir = temp_dir("full");
+        let dir = scratch_dir("pose-files-full");
         let out = dir.join("traj.txt");
         // The partial file is a link to /dev/full: every write fails with ENOSPC.
         std::os::unix::fs::symlink("/dev/full", dir.join("traj.txt.partial")).expect("symlink");

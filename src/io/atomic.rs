@@ -70,8 +70,7 @@ mod tests {
 
     #[test]
     fn a_whole_file_replaces_the_old_one_and_leaves_no_partial_file() {
-        let dir = std::env::temp_dir().join(format!("mrsmap-atomic-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).expect("temp dir");
+        let dir = crate::test_support::scratch_dir("atomic");
         let path = dir.join("traj.txt");
         std::fs::write(&path, b"old").expect("writes");
         write_whole(&path, b"new contents").expect("writes whole");
@@ -87,7 +86,7 @@ mod tests {
     #[cfg(unix)]
     #[test]
     fn a_link_is_written_through_and_a_device_is_written_to_not_replaced() {
-        let dir = std::env::temp_dir().join(format!("mrsmap-atomic-link-{}", std::process::id()));
+        let dir = crate::test_support::scratch_dir("atomic-link");
         std::fs::create_dir_all(dir.join("results")).expect("temp dir");
         let (file, link) = (dir.join("results/run1.txt"), dir.join("traj.txt"));
         std::fs::write(&file, b"old").expect("writes");
