@@ -8,7 +8,7 @@ use crate::geometry::Pose;
 use crate::io::ipc::{self, now_ns};
 use crate::io::tracker_config::read_tracker_config;
 use crate::io::tum::{TumDataset, format_stamp};
-use crate::io::wire::{ObjectPose, status};
+use crate::io::wire::ObjectPose;
 use crate::model::load;
 use anyhow::{Context, Result, bail};
 use std::path::PathBuf;
@@ -155,17 +155,19 @@ pub fn run(job: &DemoJob) -> Result<()> {
     Ok(())
 }
 
-/// Error of the camera position in the object frame against ground truth (m), through
-/// the model's `world_from_model` (no alignment).
 /// A pose's status in the demo's table.
 fn status_label(p: &ObjectPose) -> &'static str {
-    match p.status {
-        _ if p.is_fresh() => "tracking",
-        status::TRACKING => "held",
-        _ => "not tracking",
+    if p.is_fresh() {
+        "tracking"
+    } else if p.is_held() {
+        "held"
+    } else {
+        "not tracking"
     }
 }
 
+/// Error of the camera position in the object frame against ground truth (m), through
+/// the model's `world_from_model` (no alignment).
 fn ground_truth_error(dataset: &TumDataset, world_from_model: &Pose, p: &ObjectPose) -> Option<f64> {
     let gt = dataset.groundtruth.as_ref()?.interpolate(p.frame_stamp_ns as f64 * 1e-9, 0.05)?;
     let truth = world_from_model.inverse() * gt;

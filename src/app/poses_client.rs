@@ -67,7 +67,7 @@ pub fn object_name(p: &ObjectPose) -> String {
 /// The pose's status as said in print and in trajectories: a held pose as "held".
 fn status_name(p: &ObjectPose) -> &'static str {
     match p.status {
-        status::TRACKING if p.bad_frames > 0 => "held",
+        _ if p.is_held() => "held",
         status::TRACKING => "tracking",
         status::LOST => "LOST",
         status::INITIALISING => "initialising",
@@ -220,7 +220,7 @@ fn handle(job: &PosesJob, p: &ObjectPose, objects: usize, reading: &mut Reading)
     if let Some(c) = counts[..4].get_mut(p.status as usize) {
         *c += 1;
     }
-    counts[4] += u64::from(p.status == status::TRACKING && !p.is_fresh());
+    counts[4] += u64::from(p.is_held());
     let pose = camera_from_object(p);
     if p.status != status::INVALID_FRAME {
         push_recent(&mut summary.latency_ms, summary.timed, RECENT_SAMPLES, latency_ms);

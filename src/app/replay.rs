@@ -250,7 +250,7 @@ impl Replay {
             for (k, name) in names.iter().enumerate() {
                 let e = &self.out.estimates[k];
                 self.statuses[k][e.status as usize] += 1;
-                self.statuses[k][4] += usize::from(e.status == TrackingStatus::Tracking && !e.is_fresh());
+                self.statuses[k][4] += usize::from(e.is_held());
                 if e.status != TrackingStatus::InvalidFrame {
                     self.track_ms[k].push(f64::from(self.out.build_ms[k] + self.out.register_ms[k]));
                 }

@@ -119,7 +119,7 @@ pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<TrackDataset
         for (k, r) in results.iter_mut().enumerate() {
             let e = &out.estimates[k];
             r.statuses[e.status as usize] += 1;
-            r.held += usize::from(e.status == TrackingStatus::Tracking && !e.is_fresh());
+            r.held += usize::from(e.is_held());
             if e.status != TrackingStatus::InvalidFrame {
                 r.track_ms.push(f64::from(out.build_ms[k] + out.register_ms[k]));
             }

@@ -308,6 +308,12 @@ impl ObjectPose {
     pub fn is_fresh(&self) -> bool {
         self.status == status::TRACKING && self.bad_frames == 0
     }
+
+    /// Whether the pose is held: status tracking, but the frame's registration failed
+    /// and the pose is the last good one.
+    pub fn is_held(&self) -> bool {
+        self.status == status::TRACKING && self.bad_frames > 0
+    }
 }
 
 /// A loaned, uninitialised iceoryx2 sample.

@@ -62,6 +62,12 @@ impl PoseEstimate {
         self.status == TrackingStatus::Tracking && self.bad_frames == 0
     }
 
+    /// Whether the pose is held: tracking, but this frame's registration failed and the
+    /// pose is the last good one.
+    pub fn is_held(&self) -> bool {
+        self.status == TrackingStatus::Tracking && self.bad_frames > 0
+    }
+
     pub(crate) fn empty(object: usize) -> Self {
         PoseEstimate {
             stamp_ns: 0,
