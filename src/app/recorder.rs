@@ -221,7 +221,6 @@ impl Recorder {
 /// allocated. The window is by the tracker's clock, not by the frames' stamps: a driver
 /// whose stamps jump back (one that loops, or restarts on another clock) does not cut
 /// the recording short.
-#[derive(Default)]
 struct Ring {
     frames: VecDeque<Slot>,
     spare: Vec<Slot>,
@@ -280,12 +279,8 @@ impl Ring {
                 self.spare.push(old);
             }
         }
-        if self.spare.is_empty()
-            && let Some(old) = self.frames.pop_front()
-        {
-            self.spare.push(old);
-        }
-        let mut copy = self.spare.pop().unwrap_or_else(|| *Slot::new(slot.frame.depth.len(), slot.poses.capacity()));
+        // A spare buffer, else the oldest frame's.
+        let Some(mut copy) = self.spare.pop().or_else(|| self.frames.pop_front()) else { return };
         copy.frame.clone_from(&slot.frame);
         copy.poses.clone_from(&slot.poses);
         copy.received = slot.received;
