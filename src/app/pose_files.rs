@@ -8,7 +8,7 @@
 //! written to as it is.
 
 use super::poses_client::object_trajectory_path;
-use super::report::{both_written, log_line, rescue_path};
+use super::report::{both_written, log_line, rescue};
 use crate::io::atomic::{Destination, destination, partial_path};
 use anyhow::{Context as _, Result, anyhow};
 use std::collections::BTreeMap;
@@ -168,14 +168,8 @@ impl PoseFile {
         let regular = |p: &&PathBuf| std::fs::metadata(p).is_ok_and(|m| m.is_file());
         let mut whole = self.partial.as_ref().filter(regular).and_then(|p| std::fs::read(p).ok()).unwrap_or_default();
         whole.extend_from_slice(self.pending.as_bytes());
-        let rescue = rescue_path(&self.path);
-        let said = match std::fs::write(&rescue, &whole) {
-            Ok(()) => {
-                format!("could not write {}; it was written to {} instead", self.path.display(), rescue.display())
-            }
-            Err(_) => format!("could not write {}", self.path.display()),
-        };
-        Err(anyhow::Error::new(error).context(said))
+        let error = anyhow::Error::new(error).context(format!("writing {}", self.written_to().display()));
+        Err(rescue(&self.path, error, |p| Ok(std::fs::write(p, &whole)?)))
     }
 }
 
@@ -252,7 +246,7 @@ mod tests {
         files.push("teddy", 1, "2.0 0 0 0 0 0 0 1\n");
         let err = files.finish().expect_err("the disk is full");
         let text = format!("{err:#}");
-        let rescue = rescue_path(&out);
+        let rescue = crate::app::report::rescue_path(&out);
         assert!(text.contains("No space left on device") && text.contains(&rescue.display().to_string()), "{text}");
         let rescued = std::fs::read_to_string(&rescue).expect("rescued");
         assert!(rescued.starts_with("# mrsmap poses") && rescued.ends_with("1.0 0 0 0 0 0 0 1\n2.0 0 0 0 0 0 0 1\n"));

@@ -59,13 +59,23 @@ pub fn write_or_rescue(
     path: &std::path::Path,
     write: impl Fn(&std::path::Path) -> anyhow::Result<()>,
 ) -> anyhow::Result<()> {
-    let Err(error) = write(path) else { return Ok(()) };
+    write(path).map_err(|error| rescue(path, error, write))
+}
+
+/// After `error` writing the output named `path`, writes it with `write` into the
+/// system's temporary folder ([`rescue_path`]): the error, saying where it went if it
+/// could be written there.
+pub fn rescue(
+    path: &std::path::Path,
+    error: anyhow::Error,
+    write: impl Fn(&std::path::Path) -> anyhow::Result<()>,
+) -> anyhow::Error {
     let rescue = rescue_path(path);
     if rescue != path && write(&rescue).is_ok() {
         let said = format!("could not write {}; it was written to {} instead", path.display(), rescue.display());
-        return Err(error.context(said));
+        return error.context(said);
     }
-    Err(error)
+    error
 }
 
 /// Where an output named `path` is rescued to: `mrsmap-rescued-<pid>-<name>` in the
