@@ -48,6 +48,13 @@ fn odometry_then_eval_end_to_end() {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("8 frames, 7 registered") && text.contains("RPE"), "{text}");
+    // The registrations' covariances against the ground truth's motion: Eq. (6)
+    // understates the errors on real frames (docs/evaluation.md, "The pose covariance").
+    let cov = text.lines().find(|l| l.contains("covariance (Eq. 6) vs ground truth (7 frame-to-frame"));
+    let cov = cov.unwrap_or_else(|| panic!("no covariance line: {text}"));
+    let ratio: f64 =
+        cov.split("the errors are ").nth(1).and_then(|r| r.split('×').next()).expect(cov).parse().expect(cov);
+    assert!(ratio > 2.0 && ratio < 100.0, "{cov}");
     let csv = std::fs::read_to_string(&timings).expect("timings");
     assert_eq!(csv.lines().next(), Some("stamp,build_ms,register_ms,associations,iterations"));
     assert_eq!(csv.lines().count(), 9);
@@ -515,6 +522,11 @@ fn offline_tracking_every_nth_frame() {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("3 frames tracking"), "frames 0, 3 and 6 of 8: {text}");
+    // The published covariances against the ground truth: per frame, and per change
+    // between consecutive tracked frames (here 3 frames apart).
+    for what in ["(3 frames, unaligned)", "(2 changes of the error between consecutive frames)"] {
+        assert!(text.contains(&format!("covariance (Eq. 6) vs ground truth {what}: the errors are")), "{text}");
+    }
     let stamps: Vec<String> = std::fs::read_to_string(&traj)
         .expect("trajectory")
         .lines()

@@ -183,3 +183,26 @@ fn several_objects_are_tracked_in_one_step() {
         assert!(mm < 2e-3, "object {k}: {:.2} mm", mm * 1e3);
     }
 }
+
+#[test]
+fn the_published_covariance_is_scaled_as_configured() {
+    let mesh = room(5);
+    let cam = vga().halved();
+    let first = render_frame(&mesh, cam, &Pose::identity());
+    let next = render_frame(&mesh, cam, &left_increment(&Vector6::new(0.006, -0.002, 0.004, 0.001, 0.003, 0.0)));
+    let run = |covariance_scale: f64| {
+        let params = TrackerParams { covariance_scale, ..TrackerParams::default() };
+        let model = object_model(&[(&first, Pose::identity())]);
+        let mut tracker = Tracker::new(params, cam.width as usize, cam.height as usize, vec![model]).expect("tracker");
+        step(&mut tracker, &first, 0);
+        step(&mut tracker, &next, 1)
+    };
+    let (plain, wide) = (run(1.0), run(100.0));
+    assert!(plain.is_fresh() && wide.is_fresh());
+    assert_eq!(plain.camera_from_object, wide.camera_from_object, "the pose does not depend on the scale");
+    assert!(plain.covariance_ros[(0, 0)] > 0.0);
+    assert_eq!(wide.covariance_ros, plain.covariance_ros * 100.0);
+    let refused = TrackerParams { covariance_scale: 0.0, ..TrackerParams::default() };
+    let err = Tracker::new(refused, cam.width as usize, cam.height as usize, vec![]).unwrap_err();
+    assert!(err.to_string().contains("covariance_scale"), "{err}");
+}

@@ -2,9 +2,13 @@
 
 use super::dataset::{initial_pose, install_spinning, thread_pool};
 use super::interrupt::{Interrupted, Stop};
-use super::report::{both_written, percentile, progress_bar, write_bytes_or_rescue, write_or_rescue};
+use super::report::{
+    both_written, covariance_report, percentile, progress_bar, write_bytes_or_rescue, write_or_rescue,
+};
+use crate::eval::consistency::Consistency;
 use crate::eval::{ErrorStats, associate, rpe_translation};
 use crate::geometry::Pose;
+use crate::geometry::se3::left_log;
 use crate::io::camera_file::read_camera;
 use crate::io::frames::{FrameLoader, LoadError};
 use crate::io::image::ImageError;
@@ -55,6 +59,9 @@ pub struct OdometrySummary {
     pub register_ms: Vec<f64>,
     /// RPE against ground truth, if the dataset has it.
     pub rpe: Option<ErrorStats>,
+    /// How the frame-to-frame errors against ground truth compare with the
+    /// registrations' covariances (Eq. 6), if the dataset has ground truth.
+    pub covariance: Option<Consistency>,
     /// Set if the run was stopped before its last frame.
     pub interrupted: Option<Interrupted>,
 }
@@ -62,6 +69,9 @@ pub struct OdometrySummary {
 /// What a run accumulates frame by frame.
 struct Record {
     trajectory: Vec<(u64, Pose)>,
+    /// Per registered frame: the previous frame's stamp, its own, the estimated
+    /// `previous_from_current` and its covariance (Eq. 6).
+    increments: Vec<(u64, u64, Pose, nalgebra::Matrix6<f64>)>,
     comments: String,
     timings: String,
     summary: OdometrySummary,
@@ -71,6 +81,7 @@ impl Record {
     fn new(frames: usize) -> Self {
         Record {
             trajectory: Vec::with_capacity(frames),
+            increments: Vec::with_capacity(frames),
             comments: String::new(),
             timings: String::from("stamp,build_ms,register_ms,associations,iterations\n"),
             summary: OdometrySummary {
@@ -81,6 +92,7 @@ impl Record {
                 build_ms: vec![],
                 register_ms: vec![],
                 rpe: None,
+                covariance: None,
                 interrupted: None,
             },
         }
@@ -115,6 +127,9 @@ impl Record {
             TrackOutcome::Tracked(r) => {
                 s.registered += 1;
                 s.register_ms.push(ms.1);
+                if let Some(&(previous, _)) = self.trajectory.last() {
+                    self.increments.push((previous, stamp_ns, r.model_from_scene, r.covariance));
+                }
                 (r.associations, r.lm_iterations + r.newton_iterations)
             }
             TrackOutcome::Failed(e) => {
@@ -199,8 +214,27 @@ pub fn run(job: &OdometryJob) -> Result<OdometrySummary> {
         {
             s.rpe = Some(ErrorStats::of(&errors));
         }
+        s.covariance = increment_consistency(gt, &rec.increments);
     }
     Ok(s)
+}
+
+/// The errors of the frame-to-frame estimates against the ground truth's motion between
+/// the same stamps (interpolated), as left increments (`true = ΔT(δ)·estimate`, the
+/// convention of the covariance), against the covariances.
+fn increment_consistency(
+    gt: &Trajectory,
+    increments: &[(u64, u64, Pose, nalgebra::Matrix6<f64>)],
+) -> Option<Consistency> {
+    let at = |stamp_ns: u64| gt.interpolate(stamp_ns as f64 * 1e-9, 0.05);
+    let samples: Vec<_> = increments
+        .iter()
+        .filter_map(|(s0, s1, estimate, cov)| {
+            let truth = at(*s0)?.inverse() * at(*s1)?;
+            Some((left_log(&(truth * estimate.inverse())), *cov))
+        })
+        .collect();
+    Consistency::of(&samples)
 }
 
 fn write_trajectory(job: &OdometryJob, trajectory: &[(u64, Pose)], notes: &str, comments: &str) -> Result<()> {
@@ -236,5 +270,8 @@ pub fn print_summary(job: &OdometryJob, s: &OdometrySummary) {
             r.max * 1e3,
             r.rmse * 1e3
         );
+    }
+    if let Some(c) = &s.covariance {
+        println!("  {}", covariance_report(c, "frame-to-frame errors"));
     }
 }

@@ -4,8 +4,9 @@
 use super::dataset::thread_pool;
 use super::interrupt::{Interrupted, Stop};
 use super::poses_client::{object_trajectory_header, object_trajectory_path};
-use super::report::{both_written, percentile, progress_bar, write_or_rescue};
+use super::report::{both_written, covariance_report, percentile, progress_bar, write_or_rescue};
 use super::tracking::{LoadedTracker, StepOutput, Workers, invalid_frame, load_tracker, track_frame};
+use crate::eval::consistency::Consistency;
 use crate::eval::{ErrorStats, align_rigid};
 use crate::geometry::Pose;
 use crate::io::camera_file::read_camera;
@@ -14,6 +15,7 @@ use crate::io::tracker_config::TrackerConfig;
 use crate::io::tum::{TumDataset, format_stamp, write_trajectory};
 use crate::tracking::TrackingStatus;
 use anyhow::{Context, Result, bail};
+use nalgebra::{Matrix6, Vector6};
 use std::path::PathBuf;
 
 /// What to run.
@@ -67,6 +69,13 @@ pub struct ObjectResult {
     pub raw: Option<ErrorStats>,
     /// Orientation error (rad) without alignment, through the model's `world_from_model`.
     pub raw_rotation: Option<ErrorStats>,
+    /// The published covariances against the errors without alignment (which include
+    /// the error of the model's `world_from_model`, the same in every frame).
+    pub covariance: Option<Consistency>,
+    /// The published covariances against the change of the error from one tracked
+    /// frame to the next (the sum of both frames' covariances; the model's placement
+    /// error cancels).
+    pub covariance_change: Option<Consistency>,
 }
 
 /// Tracks every object through the dataset.
@@ -100,7 +109,9 @@ pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<TrackDataset
     let mut out = StepOutput::new(tracker.len());
     let mut results: Vec<ObjectResult> =
         tracker.names().iter().map(|n| ObjectResult { name: n.clone(), ..Default::default() }).collect();
-    let mut tracked: Vec<Vec<(u64, Pose)>> = vec![Vec::new(); tracker.len()];
+    // Per object and fresh pose: the frame's index, `camera_from_object` and its
+    // published covariance (ROS convention).
+    let mut published: Vec<Vec<(usize, Pose, Matrix6<f64>)>> = vec![Vec::new(); tracker.len()];
     let bar = progress_bar(frames.len() as u64, "tracking");
     let mut interrupted = None;
     for (index, entry) in frames.iter().enumerate() {
@@ -124,7 +135,7 @@ pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<TrackDataset
                 r.track_ms.push(f64::from(out.build_ms[k] + out.register_ms[k]));
             }
             if e.is_fresh() {
-                tracked[k].push((entry.depth_stamp_ns, e.camera_from_object.inverse()));
+                published[k].push((index, e.camera_from_object, e.covariance_ros));
             }
         }
     }
@@ -132,7 +143,10 @@ pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<TrackDataset
     // Every object's trajectory is tried, whatever became of the others.
     let mut written = Ok(());
     for (k, r) in results.iter_mut().enumerate() {
-        let pairs: Vec<(Pose, Pose)> = tracked[k]
+        // The trajectory: `object_from_camera` at each fresh pose's depth stamp.
+        let tracked: Vec<(u64, Pose)> =
+            published[k].iter().map(|(i, pose, _)| (frames[*i].depth_stamp_ns, pose.inverse())).collect();
+        let pairs: Vec<(Pose, Pose)> = tracked
             .iter()
             .filter_map(|(s, est)| gt_at(*s).map(|g| (*est, world_from_model[k].inverse() * g)))
             .collect();
@@ -146,16 +160,42 @@ pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<TrackDataset
             let angles: Vec<f64> = pairs.iter().map(|(est, gt)| est.rotation.angle_to(&gt.rotation)).collect();
             r.raw_rotation = Some(ErrorStats::of(&angles));
         }
+        let truth = |index: usize| gt_at(frames[index].depth_stamp_ns).map(|g| g.inverse() * world_from_model[k]);
+        (r.covariance, r.covariance_change) = covariance_consistency(&published[k], truth);
         if let Some(path) = &job.trajectory {
             let path = object_trajectory_path(path, &r.name, config.objects.len());
             let source = format!("dataset {}", job.dataset.display());
             let header = object_trajectory_header("track", &r.name, &source, interrupted);
-            let this = write_or_rescue(&path, |p| Ok(write_trajectory(p, &header, &tracked[k])?));
+            let this = write_or_rescue(&path, |p| Ok(write_trajectory(p, &header, &tracked)?));
             written = both_written(written, this);
         }
     }
     written?;
     Ok(TrackDatasetSummary { objects: results, interrupted })
+}
+
+/// The errors of the published poses (`camera_from_object`, per frame index) against
+/// `truth`, in the convention of their ROS covariances (position error `t_true − t`, the
+/// rotation error `R_true·Rᵀ` as a rotation vector, both in the camera frame): each
+/// against its covariance, and each change from one tracked frame to the next against
+/// the sum of the two covariances.
+fn covariance_consistency(
+    published: &[(usize, Pose, Matrix6<f64>)],
+    truth: impl Fn(usize) -> Option<Pose>,
+) -> (Option<Consistency>, Option<Consistency>) {
+    let errors: Vec<(usize, Vector6<f64>, Matrix6<f64>)> = published
+        .iter()
+        .filter_map(|(index, estimate, cov)| {
+            let t = truth(*index)?;
+            let position = t.translation.vector - estimate.translation.vector;
+            let rotation = (t.rotation * estimate.rotation.inverse()).scaled_axis();
+            Some((*index, Vector6::new(position.x, position.y, position.z, rotation.x, rotation.y, rotation.z), *cov))
+        })
+        .collect();
+    let absolute: Vec<_> = errors.iter().map(|(_, e, cov)| (*e, *cov)).collect();
+    let changes: Vec<_> =
+        errors.windows(2).filter(|w| w[1].0 == w[0].0 + 1).map(|w| (w[1].1 - w[0].1, w[1].2 + w[0].2)).collect();
+    (Consistency::of(&absolute), Consistency::of(&changes))
 }
 
 /// Prints the results.
@@ -185,6 +225,12 @@ pub fn print_summary(summary: &TrackDatasetSummary) {
                 angle.median.to_degrees(),
                 angle.max.to_degrees()
             );
+        }
+        if let Some(c) = &r.covariance {
+            println!("  {}", covariance_report(c, "frames, unaligned"));
+        }
+        if let Some(c) = &r.covariance_change {
+            println!("  {}", covariance_report(c, "changes of the error between consecutive frames"));
         }
     }
 }

@@ -9,6 +9,8 @@
 //!   least-squares rigid transform (Horn 1987 / Umeyama 1991, no scale), then
 //!   `‖Q.t − (R P.t + t)‖`.
 
+pub mod consistency;
+
 use crate::geometry::Pose;
 use crate::io::tum::Trajectory;
 use nalgebra::{Matrix3, Vector3};

@@ -23,6 +23,7 @@
 //! coarsest_level = 4
 //! step_tolerance = 0.002
 //! confirm_convergence = true   # false: registration ~20 % cheaper, slightly less accurate
+//! covariance_scale = 1.0       # multiplies the published covariance (Eq. 6)
 //!
 //! [[object]]
 //! name = "teddy"
@@ -142,6 +143,7 @@ struct RawTracker {
     coarsest_level: Option<usize>,
     step_tolerance: Option<f64>,
     confirm_convergence: Option<bool>,
+    covariance_scale: Option<f64>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -185,6 +187,7 @@ pub fn parse_tracker_config(text: &str, origin: &Path) -> Result<TrackerConfig, 
     }
     params.registration.confirm_with_fresh_associations =
         t.confirm_convergence.unwrap_or(params.registration.confirm_with_fresh_associations);
+    params.covariance_scale = t.covariance_scale.unwrap_or(params.covariance_scale);
     params.validate().map_err(|e| invalid(e.to_string()))?;
     params.map.validate().map_err(|e| invalid(e.to_string()))?;
     if t.threads == Some(0) {
@@ -288,6 +291,12 @@ mod tests {
         assert!(parse_tracker_config(&unknown, p).unwrap_err().to_string().contains("lamda"));
         let bad_q = GOOD.replace("[camera]", "[tracker]\nmin_quality = 3.0\n[camera]");
         assert!(parse_tracker_config(&bad_q, p).unwrap_err().to_string().contains("min_quality"));
+        for bad in ["0.0", "-1.0", "nan"] {
+            let scale = GOOD.replace("[camera]", &format!("[tracker]\ncovariance_scale = {bad}\n[camera]"));
+            assert!(parse_tracker_config(&scale, p).unwrap_err().to_string().contains("covariance_scale"), "{bad}");
+        }
+        let scale = GOOD.replace("[camera]", "[tracker]\ncovariance_scale = 100.0\n[camera]");
+        assert_eq!(parse_tracker_config(&scale, p).expect("valid").params.covariance_scale, 100.0);
         let twice = format!("{GOOD}{}", &GOOD[GOOD.find("[[object]]").expect("an object")..]);
         let err = parse_tracker_config(&twice, p).unwrap_err().to_string();
         assert!(err.contains("objects 1 and 2 are both named \"teddy\""), "{err}");

@@ -175,6 +175,10 @@ impl Tracker {
         let min_quality = if object.tracking { p.min_quality } else { p.min_quality_initialise };
         let status = update_state(object, &result, quality >= min_quality, p.lost_after_frames);
         let mut e = estimate(k, stamp_ns, status, object, result.ok().as_ref());
+        if e.is_fresh() {
+            // (A held pose keeps the identity that marks "no covariance".)
+            e.covariance_ros *= p.covariance_scale;
+        }
         e.quality = quality;
         e
     }
