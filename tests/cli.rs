@@ -129,6 +129,15 @@ fn bad_paths_and_settings_are_refused_before_any_work() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert!(err.contains("cannot open /no/such/rec.mcap") && !err.contains("is the input recording"), "{err}");
+    // A ground truth that cannot be read is named, with the line at fault, before the
+    // recording is opened.
+    let bad_truth = dir.join("truth.txt");
+    std::fs::write(&bad_truth, "1341841873.27 0 0 1\n").expect("write");
+    let args = ["replay", "--input", "/no/such/rec.mcap", "--config", path_str(&config), "--groundtruth"];
+    let out = mrsmap(&[&args[..], &[path_str(&bad_truth)]].concat());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.starts_with("error: --groundtruth ") && err.contains("truth.txt:1: expected 8 fields"), "{err}");
     // A missing dataset is said as such (before its camera is guessed from its name).
     let out = mrsmap(&["convert", "tum-to-mcap", "/no/such/dataset", "--out", path_str(&dir.join("c.mcap"))]);
     let err = String::from_utf8_lossy(&out.stderr);

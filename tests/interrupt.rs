@@ -107,6 +107,7 @@ fn convert_and_replay_stopped_early_finish_their_mcap_files() {
         trajectory: Some(dir.join("replay.txt")),
         topics: RecordingTopics::default(),
         camera: None,
+        groundtruth: None,
         every: 1,
         qvga: false,
         max_frames: None,

@@ -162,6 +162,7 @@ fn replay_job(input: &Path, out: Option<PathBuf>, trajectory: Option<PathBuf>) -
         trajectory,
         topics: RecordingTopics::default(),
         camera: None,
+        groundtruth: None,
         every: 1,
         qvga: false,
         max_frames: None,
@@ -193,7 +194,21 @@ fn replay_matches_the_dataset_run_and_is_byte_identical_at_any_thread_count() {
     assert!(outputs[0].0 == outputs[1].0, "the pose files differ between 1 and 2 threads");
     // 32FC1 keeps TUM's depth units exactly: the same poses as tracking the dataset.
     let config = config_with_threads(&dir, 2);
-    mrsmap::app::track_dataset::run(&config, &job_template(&dir)).expect("tracks the dataset");
+    let tracked = mrsmap::app::track_dataset::run(&config, &job_template(&dir)).expect("tracks the dataset");
+    // With the clip's ground truth, the replay reports the accuracy the dataset run does.
+    let with_truth =
+        ReplayJob { groundtruth: Some(teddy_clip().join("groundtruth.txt")), ..replay_job(&recording, None, None) };
+    let replayed = replay(&config, &with_truth).expect("replays with ground truth");
+    let (a, b) = (&replayed.accuracy[0], &tracked.objects[0].accuracy);
+    let (ate_a, ate_b) = (a.ate.expect("ATE of the replay"), b.ate.expect("ATE of the dataset run"));
+    assert_eq!(ate_a.count, 8);
+    assert!((ate_a.median - ate_b.median).abs() < 1e-9 && (ate_a.max - ate_b.max).abs() < 1e-9);
+    for (x, y) in [(a.covariance, b.covariance), (a.covariance_change, b.covariance_change)] {
+        let (x, y) = (x.expect("covariance figures"), y.expect("covariance figures"));
+        assert_eq!(x.count, y.count);
+        assert!((x.median_nees / y.median_nees - 1.0).abs() < 1e-6, "{x:?} against {y:?}");
+    }
+    assert!(replay(&config, &replay_job(&recording, None, None)).expect("replays").accuracy.is_empty());
     let body = |t: &str| t.lines().filter(|l| !l.starts_with('#')).map(str::to_string).collect::<Vec<_>>();
     let from_dataset = std::fs::read_to_string(dir.join("dataset.txt")).expect("trajectory");
     assert_eq!(body(&outputs[0].1), body(&from_dataset));

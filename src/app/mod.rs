@@ -1,6 +1,7 @@
 //! The command-line jobs: they read files, time work, show progress and print reports.
 //! The only place besides `main.rs` that talks to the user.
 
+pub mod accuracy;
 pub mod bench;
 pub mod camera_driver;
 pub mod capacity;

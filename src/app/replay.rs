@@ -1,21 +1,23 @@
 //! `mrsmap replay`: the tracker's per-frame step (the one the live process runs) on every
 //! frame of an MCAP recording; poses out as MCAP (ROS 2 and Foxglove) and TUM trajectories.
 
+use super::accuracy::{ObjectAccuracy, Published};
 use super::dataset::thread_pool;
 use super::interrupt::{Interrupted, Stop};
 use super::poses_client::{object_trajectory_header, object_trajectory_path};
 use super::read_ahead::read_frame;
 use super::report::{both_written, percentile, progress_bar, write_or_rescue};
-use super::tracking::{StepOutput, Workers, load_models, track_frame, tracker_for};
+use super::tracking::{LoadedModels, StepOutput, Workers, load_models, track_frame, tracker_for};
 use crate::frame::{OwnedFrame, RayTable};
 use crate::geometry::{CameraModel, Pose};
 use crate::io::mcap_source::ReadMode;
 use crate::io::mcap_write::{DEFAULT_CHUNK_BYTES, McapFile, ObjectPoseRecord, PoseChannels};
 use crate::io::recording::{Damage, RecordingReader, RecordingStats, RecordingTopics};
 use crate::io::tracker_config::TrackerConfig;
-use crate::io::tum::write_trajectory;
+use crate::io::tum::{Trajectory, write_trajectory};
 use crate::tracking::{ObjectModel, Tracker, TrackingStatus};
 use anyhow::{Context, Result, bail};
+use nalgebra::Matrix6;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -34,6 +36,9 @@ pub struct ReplayJob {
     pub topics: RecordingTopics,
     /// Camera replacing the recording's calibration.
     pub camera: Option<CameraModel>,
+    /// Ground truth of the recording (TUM, `world_from_camera` in the models' mapping
+    /// world): the summary gets each object's accuracy.
+    pub groundtruth: Option<PathBuf>,
     /// Track every n-th frame only (1: all).
     pub every: usize,
     /// Halve images and intrinsics (QVGA from VGA).
@@ -71,6 +76,8 @@ pub struct ReplaySummary {
     pub skipped_chunks: Vec<String>,
     /// Set if the replay was stopped before the recording's end.
     pub interrupted: Option<Interrupted>,
+    /// Per object, its accuracy against `ReplayJob::groundtruth` (empty without it).
+    pub accuracy: Vec<ObjectAccuracy>,
 }
 
 /// Replays the recording through the tracker.
@@ -91,6 +98,12 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
         }
         None => None,
     };
+    // Read before the replay: a bad file is reported before the work.
+    let groundtruth = job
+        .groundtruth
+        .as_deref()
+        .map(|p| Trajectory::read(p).with_context(|| format!("--groundtruth {}", p.display())))
+        .transpose()?;
     let started = Instant::now();
     let mut reader = RecordingReader::open(&job.input, job.topics.clone(), job.camera)?;
     let depth_count = reader.depth_count();
@@ -110,7 +123,7 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
             },
         )
     });
-    let models = models?.objects;
+    let LoadedModels { objects: models, world_from_model } = models?;
     let names: Vec<String> = config.objects.iter().map(|o| o.name.clone()).collect();
     // Written next to the target and renamed when finished, also after an error, so
     // the poses computed before it are kept.
@@ -132,6 +145,7 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
         statuses: vec![[0; 5]; names.len()],
         track_ms: vec![Vec::new(); names.len()],
         tracked: vec![Vec::new(); names.len()],
+        covariances: groundtruth.as_ref().map(|_| vec![Vec::new(); names.len()]),
         frames: 0,
         first_tracked: None,
         interrupted: None,
@@ -163,6 +177,7 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
         }
     }
     written?;
+    let accuracy = groundtruth.map_or_else(Vec::new, |gt| state.accuracy(&gt, &world_from_model));
     Ok(ReplaySummary {
         mode: reader.mode(),
         topics: reader.topics().clone(),
@@ -174,8 +189,12 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
         damage: reader.damage().cloned(),
         skipped_chunks: reader.skipped_chunks().to_vec(),
         interrupted: state.interrupted,
+        accuracy,
     })
 }
+
+/// A tracked pose's published covariance and the index of its frame among those tracked.
+type IndexedCovariance = (usize, Matrix6<f64>);
 
 struct Replay {
     /// The loaded models, moved into the tracker when the first frame sizes it.
@@ -187,6 +206,9 @@ struct Replay {
     statuses: Vec<[usize; 5]>,
     track_ms: Vec<Vec<f64>>,
     tracked: Vec<Vec<(u64, Pose)>>,
+    /// With ground truth, per object and tracked pose: the index of its frame among
+    /// those tracked and its published covariance.
+    covariances: Option<Vec<Vec<IndexedCovariance>>>,
     frames: usize,
     /// When the first frame had been tracked.
     first_tracked: Option<Instant>,
@@ -194,6 +216,20 @@ struct Replay {
 }
 
 impl Replay {
+    /// Each object's accuracy against the ground truth, through its model's
+    /// `world_from_model` (none without the covariances kept for it).
+    fn accuracy(&self, gt: &Trajectory, world_from_model: &[Pose]) -> Vec<ObjectAccuracy> {
+        let Some(covariances) = &self.covariances else { return Vec::new() };
+        let at = |stamp_ns: u64| gt.interpolate(stamp_ns as f64 * 1e-9, 0.05);
+        let published = |k: usize| -> Vec<Published> {
+            let poses = self.tracked[k].iter().zip(&covariances[k]);
+            poses
+                .map(|((stamp, object_from_camera), (index, cov))| (*index, *stamp, object_from_camera.inverse(), *cov))
+                .collect()
+        };
+        world_from_model.iter().enumerate().map(|(k, w)| ObjectAccuracy::of(&published(k), at, w)).collect()
+    }
+
     #[allow(clippy::too_many_arguments)]
     fn replay(
         &mut self,
@@ -245,6 +281,7 @@ impl Replay {
                 )
             });
             self.first_tracked.get_or_insert_with(Instant::now);
+            let index = self.frames;
             self.frames += 1;
             records.clear();
             for (k, name) in names.iter().enumerate() {
@@ -256,6 +293,9 @@ impl Replay {
                 }
                 if e.is_fresh() {
                     self.tracked[k].push((frame.stamp_ns, e.camera_from_object.inverse()));
+                    if let Some(c) = &mut self.covariances {
+                        c[k].push((index, e.covariance_ros));
+                    }
                     records.push(ObjectPoseRecord {
                         object: k,
                         name,
@@ -284,7 +324,7 @@ pub fn print_summary(s: &ReplaySummary) {
         "read {} colour, {} depth, {} calibration messages ({mode}); {} frames paired, {} images unpaired; {} tracked",
         s.stats.color, s.stats.depth, s.stats.camera_info, s.stats.frames, s.stats.unpaired, s.tracked_frames
     );
-    for (name, [t, l, i, v, h], ms) in &s.objects {
+    for (k, (name, [t, l, i, v, h], ms)) in s.objects.iter().enumerate() {
         println!("{name}: {t} frames tracking ({h} held), {l} lost, {i} initialising, {v} invalid");
         if !ms.is_empty() {
             println!(
@@ -292,6 +332,9 @@ pub fn print_summary(s: &ReplaySummary) {
                 percentile(ms, 0.5),
                 percentile(ms, 0.99)
             );
+        }
+        if let Some(a) = s.accuracy.get(k) {
+            a.print();
         }
     }
     if s.tracked_frames > 0 {

@@ -423,6 +423,11 @@ pub struct ReplayArgs {
     /// Camera file to use instead of the recording's calibration messages.
     #[arg(long)]
     pub camera: Option<PathBuf>,
+    /// Ground truth of the recording (a TUM trajectory of the camera in the world the
+    /// models were mapped in, e.g. motion capture): prints each object's error, through
+    /// its model's world_from_model, and how the published covariances describe it.
+    #[arg(long)]
+    pub groundtruth: Option<PathBuf>,
     /// Track only every n-th frame (the default 1 tracks every frame; none is dropped).
     #[arg(long, default_value_t = 1, value_parser = at_least_one::<usize>)]
     pub every: usize,

@@ -423,6 +423,7 @@ pub fn replay(a: ReplayArgs) -> Result<ExitCode> {
     let mut inputs = vec![named("the input recording", &a.input)];
     inputs.extend(tracker_inputs(&a.config, &config));
     inputs.extend(a.camera.as_deref().map(|c| named("the camera file", c)));
+    inputs.extend(a.groundtruth.as_deref().map(|g| named("the ground truth", g)));
     let trajectories = trajectory_files(a.trajectory.as_deref(), &config);
     let outputs = std::iter::once(("--out", a.out.as_deref()))
         .chain(trajectories.iter().map(|p| ("--trajectory", Some(p.as_path()))));
@@ -434,6 +435,7 @@ pub fn replay(a: ReplayArgs) -> Result<ExitCode> {
         trajectory: a.trajectory,
         topics: a.topics.topics(),
         camera,
+        groundtruth: a.groundtruth,
         every: a.every,
         qvga: a.qvga,
         max_frames: a.max_frames,
