@@ -209,6 +209,19 @@ fn replay_matches_the_dataset_run_and_is_byte_identical_at_any_thread_count() {
         assert!((x.median_nees / y.median_nees - 1.0).abs() < 1e-6, "{x:?} against {y:?}");
     }
     assert!(replay(&config, &replay_job(&recording, None, None)).expect("replays").accuracy.is_empty());
+    // A ground truth of another time compares nothing (the summary warns).
+    let truth = std::fs::read_to_string(teddy_clip().join("groundtruth.txt")).expect("ground truth");
+    let shifted: String = truth
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .map(|l| l.split_once(' ').map(|(t, rest)| format!("{} {rest}\n", t.parse::<f64>().expect("stamp") + 1000.0)))
+        .collect::<Option<String>>()
+        .expect("lines");
+    std::fs::write(dir.join("later.txt"), shifted).expect("write");
+    let other = ReplayJob { groundtruth: Some(dir.join("later.txt")), ..replay_job(&recording, None, None) };
+    let a = replay(&config, &other).expect("replays").accuracy[0];
+    assert_eq!((a.compared, a.ate, a.covariance), (0, None, None));
+    assert_eq!(replayed.accuracy[0].compared, 8);
     let body = |t: &str| t.lines().filter(|l| !l.starts_with('#')).map(str::to_string).collect::<Vec<_>>();
     let from_dataset = std::fs::read_to_string(dir.join("dataset.txt")).expect("trajectory");
     assert_eq!(body(&outputs[0].1), body(&from_dataset));

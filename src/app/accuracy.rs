@@ -16,6 +16,8 @@ pub type Published = (usize, u64, Pose, Matrix6<f64>);
 /// An object's accuracy (each `None` without enough poses with ground truth).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct ObjectAccuracy {
+    /// Fresh poses that had ground truth at their stamps.
+    pub compared: usize,
     /// Position error of the camera in the object frame after rigid alignment of the
     /// whole trajectory to the ground truth (the TUM ATE; the paper's measure).
     pub ate: Option<ErrorStats>,
@@ -49,7 +51,7 @@ impl ObjectAccuracy {
                 Some((*i, *est, est.inverse(), model_from_world * world_from_camera(*stamp)?, *cov))
             })
             .collect();
-        let mut out = ObjectAccuracy::default();
+        let mut out = ObjectAccuracy { compared: pairs.len(), ..ObjectAccuracy::default() };
         if pairs.len() >= 3 {
             // The camera's position in the object frame, estimated and true.
             let x: Vec<_> = pairs.iter().map(|p| p.2.translation.vector).collect();

@@ -333,8 +333,14 @@ pub fn print_summary(s: &ReplaySummary) {
                 percentile(ms, 0.99)
             );
         }
-        if let Some(a) = s.accuracy.get(k) {
-            a.print();
+        match s.accuracy.get(k) {
+            Some(a) if a.compared == 0 && t > h => {
+                println!(
+                    "  warning: the ground truth has no pose within 0.05 s of a tracked frame's stamp (is it this recording's?)"
+                );
+            }
+            Some(a) => a.print(),
+            None => {}
         }
     }
     if s.tracked_frames > 0 {
