@@ -34,7 +34,8 @@ pub enum Command {
     /// Each frame's surfel map is registered to the previous frame's map and the poses
     /// are chained from the ground-truth pose of the first frame (identity without
     /// groundtruth.txt). The trajectory holds world_from_camera, stamped with the depth
-    /// images' timestamps. With ground truth, the RPE is printed at the end.
+    /// images' timestamps. With ground truth, the RPE is printed at the end, and how many
+    /// of the registrations' predicted standard deviations (Eq. 6) the errors are.
     Odometry(OdometryArgs),
     /// Key-view SLAM over a TUM RGB-D dataset, fused into a model file (paper §5.1).
     ///
@@ -69,7 +70,8 @@ pub enum Command {
     /// `mrsmap/poses`. Ctrl-C or SIGTERM stop it cleanly.
     ///
     /// With --dataset it runs the same step on every frame of a recorded sequence
-    /// instead (no iceoryx2), and reports the error against the ground truth.
+    /// instead (no iceoryx2), and reports the error against the ground truth and how
+    /// well the published covariance describes it.
     Track(TrackArgs),
     /// Control-stack client: subscribes to the tracker's poses and prints them (and
     /// writes TUM trajectories with --out). The example to copy into a robot.
