@@ -42,29 +42,26 @@ impl ObjectAccuracy {
         world_from_camera: impl Fn(u64) -> Option<Pose>,
         world_from_model: &Pose,
     ) -> Self {
-        // Per pose with ground truth: its frame index, the estimate (`camera_from_object`),
-        // the estimated and the true `object_from_camera`, and the covariance.
+        // Per pose with ground truth: its frame index, the estimated `camera_from_object`,
+        // the true `object_from_camera`, and the covariance.
         let model_from_world = world_from_model.inverse();
-        let pairs: Vec<(usize, Pose, Pose, Pose, Matrix6<f64>)> = published
+        let pairs: Vec<(usize, Pose, Pose, Matrix6<f64>)> = published
             .iter()
-            .filter_map(|(i, stamp, est, cov)| {
-                Some((*i, *est, est.inverse(), model_from_world * world_from_camera(*stamp)?, *cov))
-            })
+            .filter_map(|(i, stamp, est, cov)| Some((*i, *est, model_from_world * world_from_camera(*stamp)?, *cov)))
             .collect();
         let mut out = ObjectAccuracy { compared: pairs.len(), ..ObjectAccuracy::default() };
         if pairs.len() >= 3 {
             // The camera's position in the object frame, estimated and true.
-            let x: Vec<_> = pairs.iter().map(|p| p.2.translation.vector).collect();
-            let y: Vec<_> = pairs.iter().map(|p| p.3.translation.vector).collect();
+            let x: Vec<_> = pairs.iter().map(|p| p.1.inverse().translation.vector).collect();
+            let y: Vec<_> = pairs.iter().map(|p| p.2.translation.vector).collect();
             let (rot, t) = align_rigid(&x, &y);
             let aligned: Vec<f64> = x.iter().zip(&y).map(|(a, b)| (b - (rot * a + t)).norm()).collect();
             out.ate = Some(ErrorStats::of(&aligned));
             out.raw = Some(ErrorStats::of(&x.iter().zip(&y).map(|(a, b)| (b - a).norm()).collect::<Vec<_>>()));
-            let angles: Vec<f64> = pairs.iter().map(|p| p.2.rotation.angle_to(&p.3.rotation)).collect();
+            let angles: Vec<f64> = pairs.iter().map(|p| p.1.inverse().rotation.angle_to(&p.2.rotation)).collect();
             out.raw_rotation = Some(ErrorStats::of(&angles));
         }
-        let truths: Vec<_> = pairs.iter().map(|(i, est, _, truth, cov)| (*i, *est, truth.inverse(), *cov)).collect();
-        (out.covariance, out.covariance_change) = covariance_consistency(&truths);
+        (out.covariance, out.covariance_change) = covariance_consistency(&pairs);
         out
     }
 
@@ -95,7 +92,8 @@ impl ObjectAccuracy {
     }
 }
 
-/// The errors of the estimates against the truth (both `camera_from_object`), in the
+/// The errors of the estimated `camera_from_object` against the truth (given as
+/// `object_from_camera`), in the
 /// convention of their ROS covariances (position error `t_true − t`, the rotation error
 /// `R_true·Rᵀ` as a rotation vector, both in the camera frame): each against its
 /// covariance, and each change from one tracked frame to the next against the sum of the
@@ -103,7 +101,8 @@ impl ObjectAccuracy {
 fn covariance_consistency(pairs: &[(usize, Pose, Pose, Matrix6<f64>)]) -> (Option<Consistency>, Option<Consistency>) {
     let errors: Vec<(usize, Vector6<f64>, Matrix6<f64>)> = pairs
         .iter()
-        .map(|(index, estimate, truth, cov)| {
+        .map(|(index, estimate, object_from_camera, cov)| {
+            let truth = object_from_camera.inverse();
             let position = truth.translation.vector - estimate.translation.vector;
             let rotation = (truth.rotation * estimate.rotation.inverse()).scaled_axis();
             (*index, Vector6::new(position.x, position.y, position.z, rotation.x, rotation.y, rotation.z), *cov)

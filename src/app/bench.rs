@@ -311,8 +311,7 @@ pub fn tracking_ms(
         .groundtruth
         .as_ref()
         .context("the tracking benchmark starts at ground truth: groundtruth.txt needed")?;
-    let start =
-        gt.interpolate(decoded[0].stamp_ns as f64 * 1e-9, 0.05).context("no ground truth at the first frame")?;
+    let start = gt.at_stamp_ns(decoded[0].stamp_ns).context("no ground truth at the first frame")?;
     // The frames run as in the live tracker (`LiveTracker::start`): on a thread that is
     // itself worker 0 of the pool, so that each frame's work starts on that thread
     // instead of being handed to a pool thread (which, after an idle gap, may wake

@@ -169,7 +169,7 @@ fn status_label(p: &ObjectPose) -> &'static str {
 /// Error of the camera position in the object frame against ground truth (m), through
 /// the model's `world_from_model` (no alignment).
 fn ground_truth_error(dataset: &TumDataset, world_from_model: &Pose, p: &ObjectPose) -> Option<f64> {
-    let gt = dataset.groundtruth.as_ref()?.interpolate(p.frame_stamp_ns as f64 * 1e-9, 0.05)?;
+    let gt = dataset.groundtruth.as_ref()?.at_stamp_ns(p.frame_stamp_ns)?;
     let truth = world_from_model.inverse() * gt;
     let estimate = camera_from_object(p).inverse();
     Some((truth.translation.vector - estimate.translation.vector).norm())
@@ -192,7 +192,7 @@ fn summarize(dataset: &TumDataset, world_from_model: &Pose, received: &[(ObjectP
     let pairs: Vec<(Pose, Pose)> = tracked
         .iter()
         .filter_map(|(p, _)| {
-            let g = gt.interpolate(p.frame_stamp_ns as f64 * 1e-9, 0.05)?;
+            let g = gt.at_stamp_ns(p.frame_stamp_ns)?;
             Some((camera_from_object(p).inverse(), world_from_model.inverse() * g))
         })
         .collect();

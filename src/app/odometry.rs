@@ -226,11 +226,10 @@ fn increment_consistency(
     gt: &Trajectory,
     increments: &[(u64, u64, Pose, nalgebra::Matrix6<f64>)],
 ) -> Option<Consistency> {
-    let at = |stamp_ns: u64| gt.interpolate(stamp_ns as f64 * 1e-9, 0.05);
     let samples: Vec<_> = increments
         .iter()
         .filter_map(|(s0, s1, estimate, cov)| {
-            let truth = at(*s0)?.inverse() * at(*s1)?;
+            let truth = gt.at_stamp_ns(*s0)?.inverse() * gt.at_stamp_ns(*s1)?;
             Some((left_log(&(truth * estimate.inverse())), *cov))
         })
         .collect();

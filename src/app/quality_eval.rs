@@ -84,8 +84,7 @@ pub fn run(config: &TrackerConfig, job: &QualityJob) -> Result<Vec<Trial>> {
         load_tracker(&judged, &pool, cam.width as usize, cam.height as usize)?;
     let world_from_model = world_from_model[0];
     let mut out = StepOutput::new(tracker.len());
-    let start =
-        gt.interpolate(frames[0].depth_stamp_ns as f64 * 1e-9, 0.05).context("no ground truth at the first frame")?;
+    let start = gt.at_stamp_ns(frames[0].depth_stamp_ns).context("no ground truth at the first frame")?;
     tracker.reinitialise(0, &(start.inverse() * world_from_model));
     // Pass 1: the tracked trajectory, aligned to the ground truth, is the truth.
     let mut estimates = Vec::new();
@@ -93,7 +92,7 @@ pub fn run(config: &TrackerConfig, job: &QualityJob) -> Result<Vec<Trial>> {
     for entry in &frames {
         let frame = pool.install(|| loader.load(entry))?;
         track_frame(&mut tracker, &pool, &frame, &mut out, Workers::Spin);
-        let g = gt.interpolate(entry.depth_stamp_ns as f64 * 1e-9, 0.05);
+        let g = gt.at_stamp_ns(entry.depth_stamp_ns);
         if let Some(g) = g.filter(|_| out.estimates[0].is_fresh()) {
             estimates.push((entry.clone(), out.estimates[0].camera_from_object.inverse()));
             truths.push(g);

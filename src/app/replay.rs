@@ -17,7 +17,6 @@ use crate::io::tracker_config::TrackerConfig;
 use crate::io::tum::{Trajectory, write_trajectory};
 use crate::tracking::{ObjectModel, Tracker, TrackingStatus};
 use anyhow::{Context, Result, bail};
-use nalgebra::Matrix6;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -145,7 +144,7 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
         statuses: vec![[0; 5]; names.len()],
         track_ms: vec![Vec::new(); names.len()],
         tracked: vec![Vec::new(); names.len()],
-        covariances: groundtruth.as_ref().map(|_| vec![Vec::new(); names.len()]),
+        published: groundtruth.as_ref().map(|_| vec![Vec::new(); names.len()]),
         frames: 0,
         first_tracked: None,
         interrupted: None,
@@ -193,9 +192,6 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
     })
 }
 
-/// A tracked pose's published covariance and the index of its frame among those tracked.
-type IndexedCovariance = (usize, Matrix6<f64>);
-
 struct Replay {
     /// The loaded models, moved into the tracker when the first frame sizes it.
     models: Vec<ObjectModel>,
@@ -206,9 +202,9 @@ struct Replay {
     statuses: Vec<[usize; 5]>,
     track_ms: Vec<Vec<f64>>,
     tracked: Vec<Vec<(u64, Pose)>>,
-    /// With ground truth, per object and tracked pose: the index of its frame among
-    /// those tracked and its published covariance.
-    covariances: Option<Vec<Vec<IndexedCovariance>>>,
+    /// With ground truth, per object: its fresh poses as published (frame index among
+    /// those tracked, stamp, pose, covariance).
+    published: Option<Vec<Vec<Published>>>,
     frames: usize,
     /// When the first frame had been tracked.
     first_tracked: Option<Instant>,
@@ -217,17 +213,11 @@ struct Replay {
 
 impl Replay {
     /// Each object's accuracy against the ground truth, through its model's
-    /// `world_from_model` (none without the covariances kept for it).
+    /// `world_from_model` (none without the poses kept for it).
     fn accuracy(&self, gt: &Trajectory, world_from_model: &[Pose]) -> Vec<ObjectAccuracy> {
-        let Some(covariances) = &self.covariances else { return Vec::new() };
-        let at = |stamp_ns: u64| gt.interpolate(stamp_ns as f64 * 1e-9, 0.05);
-        let published = |k: usize| -> Vec<Published> {
-            let poses = self.tracked[k].iter().zip(&covariances[k]);
-            poses
-                .map(|((stamp, object_from_camera), (index, cov))| (*index, *stamp, object_from_camera.inverse(), *cov))
-                .collect()
-        };
-        world_from_model.iter().enumerate().map(|(k, w)| ObjectAccuracy::of(&published(k), at, w)).collect()
+        let Some(published) = &self.published else { return Vec::new() };
+        let at = |stamp_ns: u64| gt.at_stamp_ns(stamp_ns);
+        published.iter().zip(world_from_model).map(|(p, w)| ObjectAccuracy::of(p, at, w)).collect()
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -293,8 +283,8 @@ impl Replay {
                 }
                 if e.is_fresh() {
                     self.tracked[k].push((frame.stamp_ns, e.camera_from_object.inverse()));
-                    if let Some(c) = &mut self.covariances {
-                        c[k].push((index, e.covariance_ros));
+                    if let Some(p) = &mut self.published {
+                        p[k].push((index, frame.stamp_ns, e.camera_from_object, e.covariance_ros));
                     }
                     records.push(ObjectPoseRecord {
                         object: k,

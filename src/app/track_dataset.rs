@@ -84,7 +84,7 @@ pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<TrackDataset
     let pool = thread_pool(config.threads)?;
     let LoadedTracker { mut tracker, world_from_model } =
         load_tracker(config, &pool, cam.width as usize, cam.height as usize)?;
-    let gt_at = |stamp_ns: u64| dataset.groundtruth.as_ref().and_then(|g| g.interpolate(stamp_ns as f64 * 1e-9, 0.05));
+    let gt_at = |stamp_ns: u64| dataset.groundtruth.as_ref().and_then(|g| g.at_stamp_ns(stamp_ns));
     if job.start_at_ground_truth {
         let world_from_camera =
             gt_at(frames[0].depth_stamp_ns).context("--start-at-ground-truth: no ground truth at the first frame")?;

@@ -73,11 +73,11 @@ impl Consistency {
         let within = full.iter().filter(|&&n| n <= CHI2_6_P95).count() as f64 / full.len() as f64;
         Some(Consistency {
             count: full.len(),
-            median_nees: median(&mut full),
-            median_nees_translation: median(&mut translation),
+            median_nees: median(&full),
+            median_nees_translation: median(&translation),
             within_95: within,
-            median_translation_error_m: median(&mut error_m),
-            median_translation_std_m: median(&mut std_m),
+            median_translation_error_m: median(&error_m),
+            median_translation_std_m: median(&std_m),
         })
     }
 
@@ -94,10 +94,8 @@ impl Consistency {
     }
 }
 
-fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let m = v.len();
-    if m % 2 == 1 { v[m / 2] } else { 0.5 * (v[m / 2 - 1] + v[m / 2]) }
+fn median(v: &[f64]) -> f64 {
+    super::ErrorStats::of(v).median
 }
 
 #[cfg(test)]

@@ -261,6 +261,12 @@ impl Trajectory {
         Ok(t)
     }
 
+    /// The pose at a frame's stamp (ns): [`Trajectory::interpolate`] between samples at
+    /// most 0.05 s apart (motion capture at 100 Hz, with a dropped sample or two).
+    pub fn at_stamp_ns(&self, stamp_ns: u64) -> Option<Pose> {
+        self.interpolate(stamp_ns as f64 * 1e-9, 0.05)
+    }
+
     /// The pose at `stamp` (s), interpolated linearly (translation) and spherically
     /// (rotation) between the two samples around it; `None` outside the span or across
     /// a gap longer than `max_gap` s.
