@@ -2,7 +2,8 @@
 # Live tracker benchmark: the camera driver, the tracker and the pose client as three
 # processes, the shipped 8-frame clip looped at 30 Hz for N frames (default 600).
 # Prints the tracker's time per frame and the latency from the driver's send to the
-# pose's arrival at the client (median, p99).
+# pose's arrival at the client (median, p99). PIN=false runs the tracker with its worker
+# threads unpinned (`pin_threads` in robot_config/tracker.toml).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 N=${1:-600}
@@ -15,6 +16,7 @@ TAG="mrsmap_bench_$$"
 sed -e "s#^service = \"mrsmap/camera0\"#service = \"$TAG/camera\"#" \
     -e "s#^service = \"mrsmap/poses\"#service = \"$TAG/poses\"#" \
     -e "s#^size = \"vga\"#size = \"$SIZE\"#" \
+    -e "s#^pin_threads = true #pin_threads = ${PIN:-true} #" \
     -e "s#\"\.\./models/#\"$PWD/models/#" robot_config/tracker.toml > "$OUT/tracker.toml"
 QVGA=""; [ "$SIZE" = qvga ] && QVGA="--qvga"
 $BIN track --config "$OUT/tracker.toml" --max-frames "$N" > "$OUT/tracker.txt" 2> "$OUT/tracker.err" &
@@ -28,4 +30,5 @@ $BIN camera --dataset tests/data/fr3_teddy_8 --camera robot_config/cameras/tum_f
 wait $TRACKER
 wait $CLIENT || true
 echo "live tracker, $SIZE, $N frames at ${RATE:-30} Hz ($(nproc) cores, $(date -u +%F)):"
+grep -o "on [0-9]* thread(s) ([^)]*)" "$OUT/tracker.err" || true
 cat "$OUT/tracker.txt" "$OUT/poses.txt"

@@ -92,6 +92,11 @@ fn driver_tracker_and_client_as_processes() {
     let ready = wait_for(&tracker_err, "ready", 60);
     let ports = format!("frames from {}/rgbd/vga, poses on {}", config.camera_service, config.poses_service);
     assert!(ready.last().is_some_and(|l| l.contains(&ports) && l.contains("'teddy'")), "{ready:?}");
+    // And where its workers run: one CPU each when they are as many as the process's
+    // CPUs (rayon's default count), else why not (`app::affinity`).
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let placement = mrsmap::app::affinity::plan(threads, mrsmap::app::affinity::allowed_cpus()).to_string();
+    assert!(ready.last().is_some_and(|l| l.contains(&placement)), "{placement:?} in {ready:?}");
     let (client, client_err) =
         start(&["poses", "--service", &config.poses_service, "--out", path(&traj), "--count", "8", "--timeout", "30"]);
     wait_for(&client_err, "reading", 30);

@@ -318,7 +318,7 @@ pub fn tracking_ms(
     // late). rayon cannot release a thread from a pool it joined: the loop gets a
     // thread of its own. The models load on that pool too.
     let timed = || -> Result<Vec<(f64, f64)>> {
-        let pool = super::dataset::thread_pool_on_this_thread(job.threads)?;
+        let (pool, _) = super::dataset::thread_pool_on_this_thread(job.threads, config.pin_threads)?;
         let LoadedTracker { mut tracker, world_from_model } =
             load_tracker(config, &pool, cam.width as usize, cam.height as usize)?;
         let tracker = &mut tracker;

@@ -1,5 +1,6 @@
 //! What the dataset jobs share: the starting pose, the thread pool, the frame list.
 
+use super::affinity::{self, Placement};
 use crate::geometry::Pose;
 use crate::io::tum::{TumDataset, format_stamp};
 use anyhow::{Context, Result};
@@ -82,9 +83,36 @@ pub fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
 /// [`thread_pool`] whose worker 0 is the calling thread: parallel work started on it
 /// begins there instead of being injected from outside (rayon allocates for that, and a
 /// pool thread woken after an idle gap may start late). The thread stays in the pool for
-/// good (rayon 1.13 cannot release it), so it can join one such pool only.
-pub fn thread_pool_on_this_thread(threads: Option<usize>) -> Result<rayon::ThreadPool> {
-    build_pool(rayon::ThreadPoolBuilder::new().use_current_thread(), threads)
+/// good (rayon 1.13 cannot release it), so it can join one such pool only. With `pin`,
+/// each worker is restricted to a CPU of its own ([`super::affinity`]); the placement
+/// says what was done.
+pub fn thread_pool_on_this_thread(threads: Option<usize>, pin: bool) -> Result<(rayon::ThreadPool, Placement)> {
+    let pool = build_pool(rayon::ThreadPoolBuilder::new().use_current_thread(), threads)?;
+    let placement = if pin { pin_workers(&pool) } else { Placement::Free("pin_threads = false".into()) };
+    Ok((pool, placement))
+}
+
+/// Pins worker `i` of `pool` to the `i`-th CPU the process may use; if any worker
+/// cannot be pinned, every worker gets the whole mask back.
+fn pin_workers(pool: &rayon::ThreadPool) -> Placement {
+    let allowed = affinity::allowed_cpus();
+    let everywhere = allowed.as_ref().map(Clone::clone).unwrap_or_default();
+    let plan = affinity::plan(pool.current_num_threads(), allowed);
+    let failures: Vec<String> = pool
+        .broadcast(|ctx| match plan.cpu_of(ctx.index()) {
+            Some(cpu) => affinity::pin_current_thread(cpu).err().map(|e| format!("CPU {cpu}: {e}")),
+            None => None,
+        })
+        .into_iter()
+        .flatten()
+        .collect();
+    match failures.first() {
+        None => plan,
+        Some(why) => {
+            pool.broadcast(|_| affinity::allow_current_thread(&everywhere));
+            Placement::Free(format!("pinning failed ({why})"))
+        }
+    }
 }
 
 fn build_pool(mut pool: rayon::ThreadPoolBuilder, threads: Option<usize>) -> Result<rayon::ThreadPool> {

@@ -2,6 +2,7 @@
 //! The only place besides `main.rs` that talks to the user.
 
 pub mod accuracy;
+pub mod affinity;
 pub mod bench;
 pub mod camera_driver;
 pub mod capacity;

@@ -82,6 +82,8 @@ pub struct LiveTracker<F: WireFrame> {
     /// The frame service of the other image size on the same camera (for diagnostics).
     other_size_name: String,
     poses_name: String,
+    /// Where the worker threads run (said in the log).
+    placement: super::affinity::Placement,
 }
 
 /// Creates (or reopens) the pose blackboard `name` and becomes its writer
@@ -141,7 +143,7 @@ impl<F: WireFrame> LiveTracker<F> {
         // The calling thread joins the pool as worker 0, so that the parallel work it
         // starts each frame is not injected from outside (rayon allocates for that).
         // `run` must be called on this thread.
-        let pool = super::dataset::thread_pool_on_this_thread(config.threads)?;
+        let (pool, placement) = super::dataset::thread_pool_on_this_thread(config.threads, config.pin_threads)?;
         let node = ipc::node("mrsmap_tracker")?;
         let frames_name = config.frame_size.service(&config.camera_service);
         let frames = ipc::frames::<F>(&node, &frames_name)?;
@@ -173,7 +175,7 @@ impl<F: WireFrame> LiveTracker<F> {
         };
         let poses_name = config.poses_service.clone();
         let other_size_name = config.frame_size.other().service(&config.camera_service);
-        Ok(LiveTracker { node, listener, core, frames_name, other_size_name, poses_name })
+        Ok(LiveTracker { node, listener, core, frames_name, other_size_name, poses_name, placement })
     }
 
     /// Says that no frame came, and why when it can tell: a driver publishing the other
@@ -208,8 +210,9 @@ impl<F: WireFrame> LiveTracker<F> {
         let mut waiting_reported = false;
         let objects = self.core.names.iter().map(|n| format!("'{n}'")).collect::<Vec<_>>().join(", ");
         log_line(format_args!(
-            "tracker: ready; tracking {objects} on {} thread(s); frames from {}, poses on {}; waiting for frames",
+            "tracker: ready; tracking {objects} on {} thread(s) ({}); frames from {}, poses on {}; waiting for frames",
             self.core.pool.current_num_threads(),
+            self.placement,
             self.frames_name,
             self.poses_name
         ));

@@ -12,6 +12,7 @@
 //!
 //! [tracker]                    # all optional
 //! threads = 2
+//! pin_threads = true          # one CPU per worker when as many as the process's CPUs
 //! lambda = 0.01                # scene-map resolution factor
 //! gate_mahalanobis2 = 12.0
 //! region_margin_px = 16.0
@@ -86,6 +87,11 @@ pub struct TrackerConfig {
     pub poses_service: String,
     /// Worker threads (all cores if absent).
     pub threads: Option<usize>,
+    /// Restrict each worker thread of the live tracker to a CPU of its own when the
+    /// workers are as many as the CPUs the process may use (`app::affinity`): after the
+    /// idle gap between frames an unpinned second worker may be placed on the busy core
+    /// and miss the frame.
+    pub pin_threads: bool,
     /// Tracking parameters.
     pub params: TrackerParams,
     /// Objects, in id order.
@@ -132,6 +138,7 @@ fn default_size() -> String {
 #[serde(deny_unknown_fields)]
 struct RawTracker {
     threads: Option<usize>,
+    pin_threads: Option<bool>,
     lambda: Option<f64>,
     gate_mahalanobis2: Option<f64>,
     region_margin_px: Option<f64>,
@@ -219,6 +226,7 @@ pub fn parse_tracker_config(text: &str, origin: &Path) -> Result<TrackerConfig, 
         frame_size,
         poses_service: raw.poses.service,
         threads: t.threads,
+        pin_threads: t.pin_threads.unwrap_or(true),
         params,
         objects,
     })
@@ -278,6 +286,16 @@ mod tests {
         assert!(!c.params.registration.confirm_with_fresh_associations);
         let typed = GOOD.replace("[camera]", "[tracker]\nconfirm_convergence = 1\n[camera]");
         assert!(parse_tracker_config(&typed, p).unwrap_err().to_string().contains("confirm_convergence"));
+    }
+
+    #[test]
+    fn workers_are_pinned_unless_the_config_says_not() {
+        let p = Path::new("t.toml");
+        assert!(parse_tracker_config(GOOD, p).expect("valid").pin_threads);
+        let off = GOOD.replace("[camera]", "[tracker]\npin_threads = false\n[camera]");
+        assert!(!parse_tracker_config(&off, p).expect("valid").pin_threads);
+        let typed = GOOD.replace("[camera]", "[tracker]\npin_threads = \"yes\"\n[camera]");
+        assert!(parse_tracker_config(&typed, p).unwrap_err().to_string().contains("pin_threads"));
     }
 
     #[test]
