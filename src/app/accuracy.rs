@@ -65,8 +65,10 @@ impl ObjectAccuracy {
         out
     }
 
-    /// Prints the figures that exist, indented under the object's line.
-    pub fn print(&self) {
+    /// Prints the figures that exist, indented under the object's line; the covariances
+    /// are of `model`.
+    pub fn print(&self, model: crate::tracking::CovarianceModel) {
+        let model = model.to_string();
         if let (Some(a), Some(raw), Some(angle)) = (&self.ate, &self.raw, &self.raw_rotation) {
             println!(
                 "  camera position error vs ground truth ({} frames): ATE (aligned) median {:.1} mm, max {:.1} mm, RMSE {:.1} mm; unaligned (model frame from the map) median {:.1} mm, max {:.1} mm",
@@ -84,10 +86,10 @@ impl ObjectAccuracy {
             );
         }
         if let Some(c) = &self.covariance {
-            println!("  {}", covariance_report(c, "frames, unaligned"));
+            println!("  {}", covariance_report(c, &model, "frames, unaligned"));
         }
         if let Some(c) = &self.covariance_change {
-            println!("  {}", covariance_report(c, "changes of the error between consecutive frames"));
+            println!("  {}", covariance_report(c, &model, "changes of the error between consecutive frames"));
         }
     }
 }

@@ -60,8 +60,10 @@ pub struct OdometrySummary {
     /// RPE against ground truth, if the dataset has it.
     pub rpe: Option<ErrorStats>,
     /// How the frame-to-frame errors against ground truth compare with the
-    /// registrations' covariances (Eq. 6), if the dataset has ground truth.
-    pub covariance: Option<Consistency>,
+    /// registrations' covariances, Eq. (6) and clustered
+    /// ([`crate::registration::Registration::clustered_covariance`]), if the dataset has
+    /// ground truth.
+    pub covariance: [Option<Consistency>; 2],
     /// Set if the run was stopped before its last frame.
     pub interrupted: Option<Interrupted>,
 }
@@ -70,8 +72,8 @@ pub struct OdometrySummary {
 struct Record {
     trajectory: Vec<(u64, Pose)>,
     /// Per registered frame: the previous frame's stamp, its own, the estimated
-    /// `previous_from_current` and its covariance (Eq. 6).
-    increments: Vec<(u64, u64, Pose, nalgebra::Matrix6<f64>)>,
+    /// `previous_from_current` and its covariances (Eq. 6, clustered).
+    increments: Vec<(u64, u64, Pose, [nalgebra::Matrix6<f64>; 2])>,
     comments: String,
     timings: String,
     summary: OdometrySummary,
@@ -92,7 +94,7 @@ impl Record {
                 build_ms: vec![],
                 register_ms: vec![],
                 rpe: None,
-                covariance: None,
+                covariance: [None, None],
                 interrupted: None,
             },
         }
@@ -128,7 +130,12 @@ impl Record {
                 s.registered += 1;
                 s.register_ms.push(ms.1);
                 if let Some(&(previous, _)) = self.trajectory.last() {
-                    self.increments.push((previous, stamp_ns, r.model_from_scene, r.covariance));
+                    self.increments.push((
+                        previous,
+                        stamp_ns,
+                        r.model_from_scene,
+                        [r.covariance, r.clustered_covariance],
+                    ));
                 }
                 (r.associations, r.lm_iterations + r.newton_iterations)
             }
@@ -214,23 +221,25 @@ pub fn run(job: &OdometryJob) -> Result<OdometrySummary> {
         {
             s.rpe = Some(ErrorStats::of(&errors));
         }
-        s.covariance = increment_consistency(gt, &rec.increments);
+        s.covariance = [0, 1].map(|model| increment_consistency(gt, &rec.increments, model));
     }
     Ok(s)
 }
 
 /// The errors of the frame-to-frame estimates against the ground truth's motion between
 /// the same stamps (interpolated), as left increments (`true = ΔT(δ)·estimate`, the
-/// convention of the covariance), against the covariances.
+/// convention of the covariance), against the covariances of `model` (0: Eq. 6, 1:
+/// clustered).
 fn increment_consistency(
     gt: &Trajectory,
-    increments: &[(u64, u64, Pose, nalgebra::Matrix6<f64>)],
+    increments: &[(u64, u64, Pose, [nalgebra::Matrix6<f64>; 2])],
+    model: usize,
 ) -> Option<Consistency> {
     let samples: Vec<_> = increments
         .iter()
         .filter_map(|(s0, s1, estimate, cov)| {
             let truth = gt.at_stamp_ns(*s0)?.inverse() * gt.at_stamp_ns(*s1)?;
-            Some((left_log(&(truth * estimate.inverse())), *cov))
+            Some((left_log(&(truth * estimate.inverse())), cov[model]))
         })
         .collect();
     Consistency::of(&samples)
@@ -270,7 +279,9 @@ pub fn print_summary(job: &OdometryJob, s: &OdometrySummary) {
             r.rmse * 1e3
         );
     }
-    if let Some(c) = &s.covariance {
-        println!("  {}", covariance_report(c, "frame-to-frame errors"));
+    for (c, model) in s.covariance.iter().zip(["Eq. 6", "clustered"]) {
+        if let Some(c) = c {
+            println!("  {}", covariance_report(c, model, "frame-to-frame errors"));
+        }
     }
 }

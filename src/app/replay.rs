@@ -77,6 +77,8 @@ pub struct ReplaySummary {
     pub interrupted: Option<Interrupted>,
     /// Per object, its accuracy against `ReplayJob::groundtruth` (empty without it).
     pub accuracy: Vec<ObjectAccuracy>,
+    /// The model of the published covariances.
+    pub covariance: crate::tracking::CovarianceModel,
 }
 
 /// Replays the recording through the tracker.
@@ -189,6 +191,7 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
         skipped_chunks: reader.skipped_chunks().to_vec(),
         interrupted: state.interrupted,
         accuracy,
+        covariance: config.params.covariance,
     })
 }
 
@@ -329,7 +332,7 @@ pub fn print_summary(s: &ReplaySummary) {
                     "  warning: the ground truth has no pose within 0.05 s of a tracked frame's stamp (is it this recording's?)"
                 );
             }
-            Some(a) => a.print(),
+            Some(a) => a.print(s.covariance),
             None => {}
         }
     }

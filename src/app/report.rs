@@ -130,11 +130,11 @@ impl std::fmt::Display for OutputsFailed {
 
 impl std::error::Error for OutputsFailed {}
 
-/// One line on how errors against ground truth compare with the published covariances
-/// (docs/evaluation.md, "The pose covariance").
-pub fn covariance_report(c: &crate::eval::consistency::Consistency, what: &str) -> String {
+/// One line on how errors against ground truth compare with the published covariances of
+/// `model` ("Eq. 6", "clustered"; docs/evaluation.md, "The pose covariance").
+pub fn covariance_report(c: &crate::eval::consistency::Consistency, model: &str, what: &str) -> String {
     format!(
-        "covariance (Eq. 6) vs ground truth ({} {what}): the errors are {:.1}× its standard deviation \
+        "covariance ({model}) vs ground truth ({} {what}): the errors are {:.1}× its standard deviation \
          (translation alone {:.1}×; median NEES {:.1}, consistent 5.3); {:.0} % within its 95 % bound; \
          median translation error {:.2} mm against a predicted {:.2} mm",
         c.count,

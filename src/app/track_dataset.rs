@@ -47,6 +47,8 @@ pub struct TrackDatasetSummary {
     pub objects: Vec<ObjectResult>,
     /// Set if the run was stopped before its last frame.
     pub interrupted: Option<Interrupted>,
+    /// The model of the published covariances.
+    pub covariance: crate::tracking::CovarianceModel,
 }
 
 /// Per-object results.
@@ -139,7 +141,7 @@ pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<TrackDataset
         }
     }
     written?;
-    Ok(TrackDatasetSummary { objects: results, interrupted })
+    Ok(TrackDatasetSummary { objects: results, interrupted, covariance: config.params.covariance })
 }
 
 /// Prints the results.
@@ -154,6 +156,6 @@ pub fn print_summary(summary: &TrackDatasetSummary) {
                 percentile(&r.track_ms, 0.99)
             );
         }
-        r.accuracy.print();
+        r.accuracy.print(summary.covariance);
     }
 }

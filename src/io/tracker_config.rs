@@ -24,7 +24,8 @@
 //! coarsest_level = 4
 //! step_tolerance = 0.002
 //! confirm_convergence = true   # false: registration ~20 % cheaper, slightly less accurate
-//! covariance_scale = 1.0       # multiplies the published covariance (Eq. 6)
+//! covariance = "clustered"     # or "eq6" (the paper's): the published covariance
+//! covariance_scale = 1.0       # multiplies the published covariance
 //!
 //! [[object]]
 //! name = "teddy"
@@ -36,7 +37,7 @@
 
 use super::ipc::FrameSize;
 use crate::geometry::Pose;
-use crate::tracking::{SearchRegion, TrackerParams};
+use crate::tracking::{CovarianceModel, SearchRegion, TrackerParams};
 use nalgebra::{Quaternion, Translation3, UnitQuaternion};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
@@ -150,6 +151,7 @@ struct RawTracker {
     coarsest_level: Option<usize>,
     step_tolerance: Option<f64>,
     confirm_convergence: Option<bool>,
+    covariance: Option<String>,
     covariance_scale: Option<f64>,
 }
 
@@ -194,6 +196,11 @@ pub fn parse_tracker_config(text: &str, origin: &Path) -> Result<TrackerConfig, 
     }
     params.registration.confirm_with_fresh_associations =
         t.confirm_convergence.unwrap_or(params.registration.confirm_with_fresh_associations);
+    if let Some(name) = &t.covariance {
+        params.covariance = CovarianceModel::from_name(name).ok_or_else(|| {
+            invalid(format!("tracker.covariance = {name:?}: expected \"eq6\" (Eq. 6 of the paper) or \"clustered\""))
+        })?;
+    }
     params.covariance_scale = t.covariance_scale.unwrap_or(params.covariance_scale);
     params.validate().map_err(|e| invalid(e.to_string()))?;
     params.map.validate().map_err(|e| invalid(e.to_string()))?;
@@ -286,6 +293,17 @@ mod tests {
         assert!(!c.params.registration.confirm_with_fresh_associations);
         let typed = GOOD.replace("[camera]", "[tracker]\nconfirm_convergence = 1\n[camera]");
         assert!(parse_tracker_config(&typed, p).unwrap_err().to_string().contains("confirm_convergence"));
+    }
+
+    #[test]
+    fn the_covariance_model_is_named() {
+        let p = Path::new("t.toml");
+        assert_eq!(parse_tracker_config(GOOD, p).expect("valid").params.covariance, CovarianceModel::Clustered);
+        let eq6 = GOOD.replace("[camera]", "[tracker]\ncovariance = \"eq6\"\n[camera]");
+        assert_eq!(parse_tracker_config(&eq6, p).expect("valid").params.covariance, CovarianceModel::Eq6);
+        let typo = GOOD.replace("[camera]", "[tracker]\ncovariance = \"sandwich\"\n[camera]");
+        let e = parse_tracker_config(&typo, p).unwrap_err().to_string();
+        assert!(e.contains("tracker.covariance") && e.contains("\"sandwich\"") && e.contains("clustered"), "{e}");
     }
 
     #[test]

@@ -10,7 +10,7 @@ use super::workspace::{Association, NODE_CHUNK, Partial};
 use crate::geometry::Pose;
 use crate::map::jobs::ItemJobs;
 use crate::map::{MAX_LEVELS, NONE, Surfel, SurfelMap, neighbor_index};
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{Matrix3, Matrix6, Vector3};
 use rayon::prelude::*;
 
 /// What to sum.
@@ -264,6 +264,11 @@ pub(crate) fn sum_with_lm(
     (total(&partials[..slots]), total(&lm_partials[..slots]))
 }
 
+/// The number of slots (level chunks) of a sum over `levels`.
+pub(crate) fn slot_count(scene: &SurfelMap, levels: (usize, usize)) -> usize {
+    slot_offsets(scene, levels.0, levels.1)[MAX_LEVELS]
+}
+
 /// The matched associations of one slot: a chunk of the nodes of its level (the
 /// coarsest level whose slots start at or before it; an empty level starts where the
 /// next one does).
@@ -278,6 +283,18 @@ fn slot_associations<'a>(
     let range = scene.level_nodes(level);
     let start = range.start + (slot - offsets[level]) * NODE_CHUNK;
     assoc[start..(start + NODE_CHUNK).min(range.end)].iter().filter(|a| a.is_matched())
+}
+
+/// `Σ gₛ gₛᵀ` over the slots' gradients: the middle term of the cluster-robust sandwich
+/// covariance (Liang & Zeger 1986), with each slot (up to `NODE_CHUNK` consecutive
+/// scene nodes of one level in Morton order: a small patch of the surface) one cluster.
+/// In slot order, so the same for any number of threads.
+pub(crate) fn gradient_scatter(partials: &[Partial]) -> Matrix6<f64> {
+    let mut scatter = Matrix6::zeros();
+    for p in partials {
+        scatter += p.gradient * p.gradient.transpose();
+    }
+    scatter
 }
 
 /// The sum of partial sums, in slot order.

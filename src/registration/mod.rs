@@ -33,7 +33,7 @@ use crate::geometry::Pose;
 use crate::geometry::se3::compose_left;
 use crate::map::SurfelMap;
 use associate::{AssociationInput, DirCandidates, associate};
-use evaluate::{Sum, SumInput, sum, sum_with_lm};
+use evaluate::{Sum, SumInput, gradient_scatter, slot_count, sum, sum_with_lm};
 use nalgebra::{Matrix6, Vector6};
 use thiserror::Error;
 use workspace::Partial;
@@ -92,6 +92,13 @@ pub struct Registration {
     pub model_from_scene: Pose,
     /// Covariance of the left increment `[ρ; ω]` of the estimate (Eq. 6).
     pub covariance: Matrix6<f64>,
+    /// The same covariance by the cluster-robust sandwich `H⁻¹ (Σ_c g_c g_cᵀ) H⁻¹`
+    /// (Liang & Zeger 1986), plus Eq. (6) to keep it positive definite: `H` is Eq. (6)'s
+    /// Hessian and `g_c` the gradient of the associations of cluster `c`, a patch of up
+    /// to 32 neighbouring scene nodes of one level. Unlike Eq. (6) it does not assume
+    /// that neighbouring associations err independently, and it grows with the actual
+    /// misfit (docs/evaluation.md, "The pose covariance").
+    pub clustered_covariance: Matrix6<f64>,
     /// Associations at the final pose.
     pub associations: usize,
     /// LM iterations run.
@@ -140,7 +147,8 @@ struct Solver<'a> {
     pose: Pose,
     /// The LM system (Eq. 5) over the current associations at a pose, when a sum on the
     /// way computed it: the covariance at that pose (Eq. 6) needs no sweep of its own.
-    lm_system: Option<(Pose, Partial)>,
+    /// With it the scatter of its slots' gradients ([`evaluate::gradient_scatter`]).
+    lm_system: Option<(Pose, Partial, Matrix6<f64>)>,
     /// Bit `l`: the model has a contour node at level `l` ([`SurfelMap::contour_levels`]).
     model_contours: u8,
 }
@@ -155,10 +163,11 @@ impl Solver<'_> {
         if overlap < params.min_overlap {
             return Err(RegistrationError::PoorOverlap { overlap, needed: params.min_overlap });
         }
-        let (covariance, associations, mean_mahalanobis2) = self.covariance()?;
+        let (covariance, clustered_covariance, associations, mean_mahalanobis2) = self.covariance()?;
         Ok(Registration {
             model_from_scene: self.pose,
             covariance,
+            clustered_covariance,
             associations,
             lm_iterations,
             newton_iterations,
@@ -218,7 +227,12 @@ impl Solver<'_> {
 
     /// [`Self::sum_at`], and the LM system at `pose` in the same sweep when the
     /// covariance would use the same terms (the same interpolation setting).
-    fn sum_at_with_lm(&mut self, pose: &Pose, what: Sum, interpolate: bool) -> (Partial, Option<Partial>) {
+    fn sum_at_with_lm(
+        &mut self,
+        pose: &Pose,
+        what: Sum,
+        interpolate: bool,
+    ) -> (Partial, Option<(Partial, Matrix6<f64>)>) {
         if interpolate != self.params.interpolate_lm {
             return (self.sum_at(pose, what, interpolate), None);
         }
@@ -226,7 +240,8 @@ impl Solver<'_> {
         let levels = self.levels();
         let ws = &mut *self.ws;
         let (total, lm) = sum_with_lm(&terms, &ws.assoc, (&mut ws.partials, &mut ws.lm_partials), levels, what);
-        (total, Some(lm))
+        let scatter = gradient_scatter(&ws.lm_partials[..slot_count(self.scene, levels)]);
+        (total, Some((lm, scatter)))
     }
 
     /// Levenberg–Marquardt on Eq. (5) (Madsen, Nielsen & Tingleff's damping update, with
@@ -350,7 +365,7 @@ impl Solver<'_> {
                 // is taken here.
                 let pose = self.pose;
                 let (sys, lm) = self.sum_at_with_lm(&pose, Sum::LikelihoodSystem, interpolate);
-                self.lm_system = lm.map(|lm| (pose, lm));
+                self.lm_system = lm.map(|(lm, scatter)| (pose, lm, scatter));
                 sys
             } else {
                 self.associate_enough(false, Sum::LikelihoodSystem, interpolate)?
@@ -372,7 +387,7 @@ impl Solver<'_> {
                 break;
             }
             self.pose = candidate;
-            self.lm_system = lm.map(|lm| (candidate, lm));
+            self.lm_system = lm.map(|(lm, scatter)| (candidate, lm, scatter));
             improved += 1;
             if small {
                 break;
@@ -401,12 +416,17 @@ impl Solver<'_> {
     /// Eq. (6): `Cov = H⁻¹ (Σ ∂²e/∂x∂z Cov(z) ∂²e/∂x∂zᵀ) H⁻¹`. With `z` the associated
     /// means and `Cov(z)` their covariances, the middle term of association `j` is
     /// `Jⱼᵀ Σⱼ⁻¹ Jⱼ`, the same as its Gauss–Newton Hessian block; with unit weights the
-    /// sandwich reduces to `H⁻¹`, computed here as such.
-    fn covariance(&mut self) -> Result<(Matrix6<f64>, usize, f64), RegistrationError> {
+    /// sandwich reduces to `H⁻¹`, computed here as such. Also the cluster-robust
+    /// sandwich `H⁻¹ S H⁻¹` from the scatter `S` of the same sweep's slot gradients
+    /// ([`Registration::clustered_covariance`]).
+    fn covariance(&mut self) -> Result<(Matrix6<f64>, Matrix6<f64>, usize, f64), RegistrationError> {
         let pose = self.pose;
-        let sys = match self.lm_system.take() {
-            Some((at, sys)) if at == pose => sys,
-            _ => self.sum_at(&pose, Sum::LmSystem, self.params.interpolate_lm),
+        let (sys, scatter) = match self.lm_system.take() {
+            Some((at, sys, scatter)) if at == pose => (sys, scatter),
+            _ => {
+                let sys = self.sum_at(&pose, Sum::LmSystem, self.params.interpolate_lm);
+                (sys, gradient_scatter(&self.ws.partials[..slot_count(self.scene, self.levels())]))
+            }
         };
         let h = (sys.hessian + sys.hessian.transpose()) * 0.5;
         let unconstrained =
@@ -424,7 +444,10 @@ impl Solver<'_> {
             return Err(RegistrationError::Degenerate { translation_std_m, rotation_std_rad });
         }
         let mean = 2.0 * sys.cost / sys.count.max(1) as f64;
-        Ok((cov, sys.count as usize, mean))
+        // Plus Eq. (6) itself: positive definite even where few clusters leave the
+        // scatter singular.
+        let clustered = cov * scatter * cov + cov;
+        Ok((cov, (clustered + clustered.transpose()) * 0.5, sys.count as usize, mean))
     }
 }
 

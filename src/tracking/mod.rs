@@ -21,5 +21,5 @@ pub mod tracker;
 
 pub use extent::{ExtentError, ModelExtent};
 pub use object::{ObjectModel, PoseEstimate, SearchRegion, TrackingStatus};
-pub use params::{TrackerParams, TrackerParamsError};
+pub use params::{CovarianceModel, TrackerParams, TrackerParamsError};
 pub use tracker::{Tracker, TrackerError};

@@ -34,12 +34,59 @@ pub struct TrackerParams {
     pub lost_after_frames: u32,
     /// Predict the next pose by constant velocity.
     pub constant_velocity: bool,
+    /// Which covariance of the registration is published.
+    pub covariance: CovarianceModel,
     /// Multiplies the published covariance (variance units: 100 widens every standard
-    /// deviation tenfold). 1 publishes Eq. (6) of the paper as it is, which treats every
-    /// surfel association as an independent measurement and so understates the actual
-    /// errors: measured against ground truth, they are 9–25× its standard deviations
-    /// (docs/evaluation.md, "The pose covariance"; `mrsmap track --dataset` measures it).
+    /// deviation tenfold). Neither model describes the actual errors fully (measured
+    /// against ground truth: docs/evaluation.md, "The pose covariance"; `mrsmap track
+    /// --dataset` measures it).
     pub covariance_scale: f64,
+}
+
+/// Which covariance of a registration the tracker publishes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CovarianceModel {
+    /// Eq. (6) of the paper ([`crate::registration::Registration::covariance`]): every
+    /// surfel association an independent measurement. On fr3_teddy the tracker's errors
+    /// from frame to frame are 9× its standard deviations.
+    Eq6,
+    /// The cluster-robust sandwich
+    /// ([`crate::registration::Registration::clustered_covariance`]): neighbouring
+    /// associations may err together. On fr3_teddy the tracker's errors from frame to
+    /// frame are 3× its standard deviations.
+    Clustered,
+}
+
+impl CovarianceModel {
+    /// The name in configurations (`covariance = "…"`).
+    pub fn name(self) -> &'static str {
+        match self {
+            CovarianceModel::Eq6 => "eq6",
+            CovarianceModel::Clustered => "clustered",
+        }
+    }
+
+    /// The model of a configuration name.
+    pub fn from_name(name: &str) -> Option<Self> {
+        [CovarianceModel::Eq6, CovarianceModel::Clustered].into_iter().find(|m| m.name() == name)
+    }
+
+    /// The covariance of this model in a registration.
+    pub fn of(self, r: &crate::registration::Registration) -> &nalgebra::Matrix6<f64> {
+        match self {
+            CovarianceModel::Eq6 => &r.covariance,
+            CovarianceModel::Clustered => &r.clustered_covariance,
+        }
+    }
+}
+
+impl std::fmt::Display for CovarianceModel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            CovarianceModel::Eq6 => "Eq. 6",
+            CovarianceModel::Clustered => "clustered",
+        })
+    }
 }
 
 impl Default for TrackerParams {
@@ -66,6 +113,7 @@ impl Default for TrackerParams {
             min_quality_initialise: 0.6,
             lost_after_frames: 3,
             constant_velocity: true,
+            covariance: CovarianceModel::Clustered,
             covariance_scale: 1.0,
         }
     }

@@ -174,7 +174,7 @@ impl Tracker {
         };
         let min_quality = if object.tracking { p.min_quality } else { p.min_quality_initialise };
         let status = update_state(object, &result, quality >= min_quality, p.lost_after_frames);
-        let mut e = estimate(k, stamp_ns, status, object, result.ok().as_ref(), p.covariance_scale);
+        let mut e = estimate(k, stamp_ns, status, object, result.ok().as_ref(), p);
         e.quality = quality;
         e
     }
@@ -182,7 +182,7 @@ impl Tracker {
     /// The estimate of object `k` for a frame that could not be used.
     pub fn invalid_frame(&self, k: usize, stamp_ns: u64) -> PoseEstimate {
         let object = &self.objects[k];
-        estimate(k, stamp_ns, TrackingStatus::InvalidFrame, object, None, self.params.covariance_scale)
+        estimate(k, stamp_ns, TrackingStatus::InvalidFrame, object, None, &self.params)
     }
 
     /// Re-initialises object `k` at `camera_from_object` (e.g. from an external
@@ -260,8 +260,8 @@ fn update_state(
     }
 }
 
-/// The published estimate: the pose as `camera_from_object` with its covariance in the
-/// ROS convention, times `covariance_scale` (only for a pose estimated from this frame;
+/// The published estimate: the pose as `camera_from_object` with its covariance (of
+/// the configured model) in the ROS convention, times `covariance_scale` (only for a pose estimated from this frame;
 /// any other keeps the identity that marks "no covariance").
 fn estimate(
     k: usize,
@@ -269,7 +269,7 @@ fn estimate(
     status: TrackingStatus,
     object: &TrackedObject,
     result: Option<&Registration>,
-    covariance_scale: f64,
+    params: &TrackerParams,
 ) -> PoseEstimate {
     let camera_from_object = object.object_from_camera.inverse();
     let mut e = PoseEstimate { stamp_ns, status, camera_from_object, ..PoseEstimate::empty(k) };
@@ -278,8 +278,8 @@ fn estimate(
         e.associations = r.associations;
         e.iterations = r.lm_iterations + r.newton_iterations;
         if status == TrackingStatus::Tracking && object.bad_frames == 0 {
-            let cov = invert_left_covariance(&object.object_from_camera, &r.covariance);
-            e.covariance_ros = left_covariance_to_ros(&camera_from_object, &cov) * covariance_scale;
+            let cov = invert_left_covariance(&object.object_from_camera, params.covariance.of(r));
+            e.covariance_ros = left_covariance_to_ros(&camera_from_object, &cov) * params.covariance_scale;
         }
     }
     e
