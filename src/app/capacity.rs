@@ -31,27 +31,34 @@ fn kernel(n: u64) -> u64 {
 }
 
 /// The time `threads` threads take to run the kernel together: from a common start to
-/// the last one's end. Each thread first sleeps briefly and then meets the others at a
-/// barrier: the kernel places a thread that wakes on an idle core, while a thread just
-/// spawned may start on its parent's busy core and stay there for the whole run (seen on
-/// the Intel VM after a few seconds of two-core work: the capacity read ×1.0 with every
-/// other core idle).
+/// the last one's end. With as many threads as the process has CPUs, each runs on a CPU
+/// of its own (`super::affinity`, as the live tracker's workers): unpinned, a thread
+/// started after a few seconds of two-core work was placed on the busy CPU and stayed
+/// there for the whole run (the capacity read ×1.0 with the other CPU idle, on the Intel
+/// VM of stop 54; starting the threads from a sleep helped only in some runs).
 fn timed(threads: usize) -> Duration {
     use std::sync::Barrier;
     let n = black_box(KERNEL_ITERATIONS);
     let start = Barrier::new(threads);
-    let run = || {
-        std::thread::sleep(Duration::from_millis(1));
+    let placement = if threads > 1 {
+        super::affinity::plan(threads, super::affinity::allowed_cpus())
+    } else {
+        super::affinity::Placement::Free("one thread".into())
+    };
+    let run = |index: usize| {
+        if let Some(cpu) = placement.cpu_of(index) {
+            // Best effort: unpinned, the figure can only read low.
+            let _ = super::affinity::pin_current_thread(cpu);
+        }
         start.wait();
         let t = Instant::now();
         black_box(kernel(n));
         (t, Instant::now())
     };
     let spans: Vec<(Instant, Instant)> = std::thread::scope(|s| {
-        let others: Vec<_> = (1..threads).map(|_| s.spawn(run)).collect();
-        let mut spans = vec![run()];
-        spans.extend(others.into_iter().filter_map(|h| h.join().ok()));
-        spans
+        let run = &run;
+        let all: Vec<_> = (0..threads).map(|i| s.spawn(move || run(i))).collect();
+        all.into_iter().filter_map(|h| h.join().ok()).collect()
     });
     let first = spans.iter().map(|s| s.0).min();
     let last = spans.iter().map(|s| s.1).max();
