@@ -8,7 +8,8 @@ consecutive frames, as `mrsmap replay --groundtruth` prints them (docs/evaluatio
 
 TOPIC is the object's pose topic (/mrsmap/<object>/pose); the seven numbers are the
 model's world_from_model (`mrsmap model info` prints them). Held poses (identity
-covariance) are skipped, as the tracker marks them.
+covariance) are skipped, as the tracker marks them. Needs
+`pip install mcap mcap-ros2-support scipy numpy`.
 """
 import sys, numpy as np
 from mcap_ros2.reader import read_ros2_messages
