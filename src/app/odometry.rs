@@ -14,6 +14,7 @@ use crate::io::frames::{FrameLoader, LoadError};
 use crate::io::image::ImageError;
 use crate::io::tum::{self, Trajectory, TumDataset, format_stamp};
 use crate::odometry::{Odometry, OdometryParams, TrackOutcome};
+use crate::tracking::CovarianceModel;
 use anyhow::{Context, Result, bail};
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -60,19 +61,22 @@ pub struct OdometrySummary {
     /// RPE against ground truth, if the dataset has it.
     pub rpe: Option<ErrorStats>,
     /// How the frame-to-frame errors against ground truth compare with the
-    /// registrations' covariances, Eq. (6) and clustered
-    /// ([`crate::registration::Registration::clustered_covariance`]), if the dataset has
-    /// ground truth.
+    /// registrations' covariances, Eq. (6) and clustered (in this order), if the dataset
+    /// has ground truth.
     pub covariance: [Option<Consistency>; 2],
     /// Set if the run was stopped before its last frame.
     pub interrupted: Option<Interrupted>,
 }
 
+/// The covariance models odometry compares with the ground truth, in the order of
+/// [`OdometrySummary::covariance`].
+const MODELS: [CovarianceModel; 2] = [CovarianceModel::Eq6, CovarianceModel::Clustered];
+
 /// What a run accumulates frame by frame.
 struct Record {
     trajectory: Vec<(u64, Pose)>,
     /// Per registered frame: the previous frame's stamp, its own, the estimated
-    /// `previous_from_current` and its covariances (Eq. 6, clustered).
+    /// `previous_from_current` and its covariances (of [`MODELS`]).
     increments: Vec<(u64, u64, Pose, [nalgebra::Matrix6<f64>; 2])>,
     comments: String,
     timings: String,
@@ -130,12 +134,7 @@ impl Record {
                 s.registered += 1;
                 s.register_ms.push(ms.1);
                 if let Some(&(previous, _)) = self.trajectory.last() {
-                    self.increments.push((
-                        previous,
-                        stamp_ns,
-                        r.model_from_scene,
-                        [r.covariance, r.clustered_covariance],
-                    ));
+                    self.increments.push((previous, stamp_ns, r.model_from_scene, MODELS.map(|m| *m.of(&r))));
                 }
                 (r.associations, r.lm_iterations + r.newton_iterations)
             }
@@ -221,15 +220,14 @@ pub fn run(job: &OdometryJob) -> Result<OdometrySummary> {
         {
             s.rpe = Some(ErrorStats::of(&errors));
         }
-        s.covariance = [0, 1].map(|model| increment_consistency(gt, &rec.increments, model));
+        s.covariance = [0, 1].map(|k| increment_consistency(gt, &rec.increments, k));
     }
     Ok(s)
 }
 
 /// The errors of the frame-to-frame estimates against the ground truth's motion between
 /// the same stamps (interpolated), as left increments (`true = ΔT(δ)·estimate`, the
-/// convention of the covariance), against the covariances of `model` (0: Eq. 6, 1:
-/// clustered).
+/// convention of the covariance), against the covariances of `MODELS[model]`.
 fn increment_consistency(
     gt: &Trajectory,
     increments: &[(u64, u64, Pose, [nalgebra::Matrix6<f64>; 2])],
@@ -279,9 +277,9 @@ pub fn print_summary(job: &OdometryJob, s: &OdometrySummary) {
             r.rmse * 1e3
         );
     }
-    for (c, model) in s.covariance.iter().zip(["Eq. 6", "clustered"]) {
+    for (c, model) in s.covariance.iter().zip(MODELS) {
         if let Some(c) = c {
-            println!("  {}", covariance_report(c, model, "frame-to-frame errors"));
+            println!("  {}", covariance_report(c, &model.to_string(), "frame-to-frame errors"));
         }
     }
 }
