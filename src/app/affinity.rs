@@ -40,6 +40,15 @@ impl Placement {
             Placement::Free(_) => None,
         }
     }
+
+    /// Restricts the calling thread, worker `index`, to its planned CPU (nothing if it
+    /// has none); an error names the CPU.
+    pub fn pin_worker(&self, index: usize) -> std::io::Result<()> {
+        match self.cpu_of(index) {
+            Some(cpu) => pin_current_thread(cpu).map_err(|e| std::io::Error::new(e.kind(), format!("CPU {cpu}: {e}"))),
+            None => Ok(()),
+        }
+    }
 }
 
 impl std::fmt::Display for Placement {

@@ -40,15 +40,11 @@ fn timed(threads: usize) -> Duration {
     use std::sync::Barrier;
     let n = black_box(KERNEL_ITERATIONS);
     let start = Barrier::new(threads);
-    let placement = if threads > 1 {
-        super::affinity::plan(threads, super::affinity::allowed_cpus())
-    } else {
-        super::affinity::Placement::Free("one thread".into())
-    };
+    let placement = (threads > 1).then(|| super::affinity::plan(threads, super::affinity::allowed_cpus()));
     let run = |index: usize| {
-        if let Some(cpu) = placement.cpu_of(index) {
+        if let Some(p) = &placement {
             // Best effort: unpinned, the figure can only read low.
-            let _ = super::affinity::pin_current_thread(cpu);
+            let _ = p.pin_worker(index);
         }
         start.wait();
         let t = Instant::now();

@@ -93,25 +93,18 @@ pub fn thread_pool_on_this_thread(threads: Option<usize>, pin: bool) -> Result<(
 }
 
 /// Pins worker `i` of `pool` to the `i`-th CPU the process may use; if any worker
-/// cannot be pinned, every worker gets the whole mask back.
+/// cannot be pinned, every worker gets the whole mask back (the planned CPUs are all the
+/// process may use).
 fn pin_workers(pool: &rayon::ThreadPool) -> Placement {
-    let allowed = affinity::allowed_cpus();
-    let everywhere = allowed.as_ref().map(Clone::clone).unwrap_or_default();
-    let plan = affinity::plan(pool.current_num_threads(), allowed);
-    let failures: Vec<String> = pool
-        .broadcast(|ctx| match plan.cpu_of(ctx.index()) {
-            Some(cpu) => affinity::pin_current_thread(cpu).err().map(|e| format!("CPU {cpu}: {e}")),
-            None => None,
-        })
-        .into_iter()
-        .flatten()
-        .collect();
-    match failures.first() {
-        None => plan,
-        Some(why) => {
-            pool.broadcast(|_| affinity::allow_current_thread(&everywhere));
+    let plan = affinity::plan(pool.current_num_threads(), affinity::allowed_cpus());
+    let failures: Vec<String> =
+        pool.broadcast(|ctx| plan.pin_worker(ctx.index()).err().map(|e| e.to_string())).into_iter().flatten().collect();
+    match (failures.first(), &plan) {
+        (Some(why), Placement::Pinned { cpus }) => {
+            pool.broadcast(|_| affinity::allow_current_thread(cpus));
             Placement::Free(format!("pinning failed ({why})"))
         }
+        _ => plan,
     }
 }
 

@@ -261,8 +261,9 @@ fn update_state(
 }
 
 /// The published estimate: the pose as `camera_from_object` with its covariance (of
-/// the configured model) in the ROS convention, times `covariance_scale` (only for a pose estimated from this frame;
-/// any other keeps the identity that marks "no covariance").
+/// the configured model) in the ROS convention, times `covariance_scale` (only for a
+/// pose estimated from this frame; any other keeps the identity that marks "no
+/// covariance").
 fn estimate(
     k: usize,
     stamp_ns: u64,
