@@ -93,10 +93,17 @@ n=$(grep -vc '^#' "$OUT/replay.txt")
 printf '%-20s replay  MCAP    %d frames tracked, ATE median %.1f mm   %s\n' fr3_teddy_100-199 "$n" "$med" \
   "$(awk -v m="$med" 'BEGIN { printf "%s (target median <= 10 mm)", (m <= 10 ? "meets" : "MISSES") }')"
 if awk -v m="$med" -v n="$n" 'BEGIN {exit !(m > 8.5 || n < 90)}'; then echo "  REGRESSION: guard is ATE median <= 8.5 mm over >= 90 frames"; status=1; fi
-# The tracker's quality signal as a failure detector (precision and recall at min_quality).
-q=$($BIN eval tracking-quality --config robot_config/tracker.toml --dataset "$DATA/fr3_teddy_first200" \
-  --camera robot_config/cameras/tum_fr3.toml | grep "(min_quality)")
+# The tracker's quality signal as a failure detector: the quality alone at min_quality, and
+# the tracker's rule (quality below min_quality, or free space above max_free_space).
+quality_table=$($BIN eval tracking-quality --config robot_config/tracker.toml --dataset "$DATA/fr3_teddy_first200" \
+  --camera robot_config/cameras/tum_fr3.toml)
+q=$(echo "$quality_table" | grep "(min_quality)")
 echo "tracking quality < min_quality as failure detector: $q"
 if echo "$q" | awk -F'|' '{exit !($4 < 0.9 || $5 < 0.65)}'; then echo "  REGRESSION: guard is precision >= 0.9, recall >= 0.65"; status=1; fi
+r=$(echo "$quality_table" | grep "(max_free_space)")
+echo "the tracker's rule (quality, or free space above max_free_space) as failure detector: $r"
+if echo "$r" | awk -F'|' '{exit !($4 < 0.9 || $5 < 0.8 || $7 > 0)}'; then
+  echo "  REGRESSION: guard is precision >= 0.9, recall >= 0.8, no failure farther than 200 mm missed"; status=1
+fi
 python3 scripts/evo_crosscheck.py "$BIN" "$DATA/fr3_teddy_first200/groundtruth.txt" "$OUT/fr3_teddy_first200.txt"
 exit $status

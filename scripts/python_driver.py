@@ -47,7 +47,7 @@ class ObjectPose(ctypes.Structure):
                 ("status", ctypes.c_uint32), ("bad_frames", ctypes.c_uint32),
                 ("associations", ctypes.c_uint32), ("iterations", ctypes.c_uint32),
                 ("build_ms", ctypes.c_float), ("register_ms", ctypes.c_float),
-                ("total_ms", ctypes.c_float), ("reserved", ctypes.c_uint32),
+                ("total_ms", ctypes.c_float), ("free_space", ctypes.c_float),
                 ("name", ctypes.c_uint8 * 32)]
 
     @staticmethod
@@ -114,7 +114,7 @@ def main() -> int:
         name = bytes(pose.name).split(b"\0")[0].decode()
         t = list(pose.translation_m)
         print(f"frame {seq}: {name} status {pose.status} quality {pose.quality:.2f} "
-              f"camera_from_object t = [{t[0]:+.3f}, {t[1]:+.3f}, {t[2]:+.3f}]")
+              f"free space {pose.free_space:.3f} camera_from_object t = [{t[0]:+.3f}, {t[1]:+.3f}, {t[2]:+.3f}]")
         # Estimated from this frame: status tracking and no bad frame (else a held pose).
         tracked += pose.status == 0 and pose.bad_frames == 0
     print(f"{tracked}/{total} frames tracked")

@@ -11,8 +11,10 @@ use mrsmap::map::{MapBuilder, MapCapacity, MapParams, PlacedFrame, SurfelMap};
 use mrsmap::model::RootStats;
 use mrsmap::slam::VolumeShape;
 use mrsmap::synthetic::{RenderTarget, room};
-use mrsmap::tracking::{ModelExtent, ObjectModel, PoseEstimate, SearchRegion, Tracker, TrackerParams, TrackingStatus};
-use nalgebra::{Matrix3, Vector3, Vector6};
+use mrsmap::tracking::{
+    FreeSpaceProbe, ModelExtent, ObjectModel, PoseEstimate, SearchRegion, Tracker, TrackerParams, TrackingStatus,
+};
+use nalgebra::{Matrix3, Translation3, UnitQuaternion, Vector3, Vector6};
 
 /// The "object": the two boxes and the sphere on the table of `room(5)`, fused from
 /// `views` at their known poses (object frame = the first camera's frame), inside a box
@@ -77,6 +79,7 @@ fn blank() -> PoseEstimate {
         camera_from_object: Pose::identity(),
         covariance_ros: nalgebra::Matrix6::identity(),
         quality: 0.0,
+        free_space: 0.0,
         associations: 0,
         iterations: 0,
         bad_frames: 0,
@@ -102,9 +105,10 @@ fn tracks_loses_and_reinitialises() {
         last_good = e.camera_from_object;
         let (mm, deg) = pose_error(&e.camera_from_object.inverse(), truth);
         println!(
-            "frame {k}: {:?} quality {:.2} error {:.2} mm {:.3}° assoc {} it {}",
+            "frame {k}: {:?} quality {:.2} free space {:.3} error {:.2} mm {:.3}° assoc {} it {}",
             e.status,
             e.quality,
+            e.free_space,
             mm * 1e3,
             deg,
             e.associations,
@@ -114,6 +118,7 @@ fn tracks_loses_and_reinitialises() {
         assert!(e.is_fresh(), "frame {k}: estimated from its frame");
         assert!(mm < 2e-3 && deg < 0.25, "frame {k}: {:.2} mm {:.3}°", mm * 1e3, deg);
         assert!(e.quality > 0.8, "a good fit has quality near 1: {}", e.quality);
+        assert!(e.free_space < 0.02, "the depth image does not see through a good fit: {}", e.free_space);
         assert!(e.covariance_ros[(0, 0)] > 0.0 && e.covariance_ros[(0, 0)] < 1e-4);
     }
     // The camera turns away: no overlap. Held twice, lost at the third frame.
@@ -205,4 +210,44 @@ fn the_published_covariance_is_scaled_as_configured() {
     let refused = TrackerParams { covariance_scale: 0.0, ..TrackerParams::default() };
     let err = Tracker::new(refused, cam.width as usize, cam.height as usize, vec![]).unwrap_err();
     assert!(err.to_string().contains("covariance_scale"), "{err}");
+}
+
+/// The free-space check (`tracking::free_space`): the depth image sees through a model
+/// placed in front of the surfaces, not one placed on them. A frame whose registration explains what is left of the objects while
+/// the depth image sees through the rest is not counted as good.
+#[test]
+fn a_pose_the_depth_image_sees_through_is_not_tracked() {
+    let mesh = room(5);
+    let cam = vga().halved();
+    let first = render_frame(&mesh, cam, &Pose::identity());
+    let probe = FreeSpaceProbe::new(&object_model(&[(&first, Pose::identity())]).map);
+    let f = frame(&first, 0);
+    let shifted = |dz: f64| {
+        probe.measure(&f, &Pose::from_parts(Translation3::new(0.0, 0.0, dz), UnitQuaternion::identity()), 0.02)
+    };
+    let (truth, nearer) = (shifted(0.0), shifted(-0.1));
+    println!("free space at the truth {truth:?}, 10 cm nearer the camera {nearer:?}");
+    assert!(truth.supported > 100 && truth.fraction() < 0.02, "{truth:?}");
+    assert!(nearer.fraction() > 0.9, "{nearer:?}");
+
+    // The left half of the image now looks through to 6 m: the objects there are gone.
+    let mut gone = render_frame(&mesh, cam, &Pose::identity());
+    let (width, far) = (cam.width as usize, (6.0 / cam.depth_scale_m) as u16);
+    for row in gone.depth.chunks_mut(width) {
+        row[..width / 2].fill(far);
+    }
+    let run = |max_free_space: f64| {
+        let params = TrackerParams { max_free_space, ..TrackerParams::default() };
+        let model = object_model(&[(&first, Pose::identity())]);
+        let mut tracker = Tracker::new(params, cam.width as usize, cam.height as usize, vec![model]).expect("tracker");
+        assert!(step(&mut tracker, &first, 0).is_fresh());
+        step(&mut tracker, &gone, 1)
+    };
+    let (checked, unchecked) = (run(TrackerParams::default().max_free_space), run(1.0));
+    println!("with the check: {checked:?}\nwithout: {unchecked:?}");
+    // What is left fits the model well, so the quality alone accepts the frame.
+    assert!(unchecked.is_fresh() && unchecked.quality >= TrackerParams::default().min_quality, "{unchecked:?}");
+    assert!(checked.free_space > 0.2, "{checked:?}");
+    assert_eq!((checked.quality, checked.free_space), (unchecked.quality, unchecked.free_space));
+    assert!(checked.is_held(), "the frame's registration counts as failed: {checked:?}");
 }

@@ -112,8 +112,8 @@ pub fn run(job: &DemoJob) -> Result<()> {
     let mut received: Vec<(ObjectPose, u64)> = Vec::new();
     let deadline = Instant::now() + Duration::from_secs(60);
     println!(
-        "{:<18} {:<13} {:>30} {:>9} {:>10} {:>10}",
-        "stamp", "status", "camera_from_object t (m)", "quality", "track ms", "error mm"
+        "{:<18} {:<13} {:>30} {:>9} {:>10} {:>10} {:>10}",
+        "stamp", "status", "camera_from_object t (m)", "quality", "free space", "track ms", "error mm"
     );
     while received.len() < frames && Instant::now() < deadline {
         // Wake on the tracker's notification (no polling).
@@ -125,13 +125,14 @@ pub fn run(job: &DemoJob) -> Result<()> {
             let error = ground_truth_error(&dataset, &world_from_model, &p);
             let t = p.translation_m;
             println!(
-                "{:<18} {:<13} [{:+.3}, {:+.3}, {:+.3}] {:>9.2} {:>10.2} {:>10}",
+                "{:<18} {:<13} [{:+.3}, {:+.3}, {:+.3}] {:>9.2} {:>10.3} {:>10.2} {:>10}",
                 format_stamp(p.frame_stamp_ns),
                 status_label(&p),
                 t[0],
                 t[1],
                 t[2],
                 p.quality,
+                p.free_space,
                 p.build_ms + p.register_ms,
                 error.map_or("-".into(), |e| format!("{:.1}", e * 1e3))
             );

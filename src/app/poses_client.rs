@@ -230,7 +230,7 @@ fn handle(job: &PosesJob, p: &ObjectPose, objects: usize, reading: &mut Reading)
     if job.print {
         let t = pose.translation.vector;
         println!(
-            "{} {:<8} {:<13} camera_from_object t = [{:+.4}, {:+.4}, {:+.4}] m  q = [{:+.4}, {:+.4}, {:+.4}, {:+.4}]  quality {:.2}  track {:.2} ms  latency {:.2} ms",
+            "{} {:<8} {:<13} camera_from_object t = [{:+.4}, {:+.4}, {:+.4}] m  q = [{:+.4}, {:+.4}, {:+.4}, {:+.4}]  quality {:.2}  free space {:.3}  track {:.2} ms  latency {:.2} ms",
             format_stamp(p.frame_stamp_ns),
             name,
             status_name(p),
@@ -242,6 +242,7 @@ fn handle(job: &PosesJob, p: &ObjectPose, objects: usize, reading: &mut Reading)
             p.rotation_xyzw[2],
             p.rotation_xyzw[3],
             p.quality,
+            p.free_space,
             p.build_ms + p.register_ms,
             latency_ms
         );

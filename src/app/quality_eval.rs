@@ -7,8 +7,10 @@
 //! registered again from `trials` priors perturbed at random around the truth. A
 //! registration *failed* if it ended farther than `fail_mm` (camera position in the
 //! object frame) or `fail_deg` from the truth, or did not converge at all; the quality
-//! signal *flags* it if its quality is below a threshold. Precision and recall of the
-//! flag for failures are reported per threshold.
+//! signal *flags* it if its quality is below a threshold, and the tracker's rule also if
+//! the depth image sees through more than `max_free_space` of the model
+//! (`tracking::free_space`). Precision and recall of the flag for failures are reported
+//! per threshold of each.
 
 use super::dataset::thread_pool;
 use super::tracking::{LoadedTracker, StepOutput, Workers, load_tracker, track_frame};
@@ -54,9 +56,17 @@ pub struct QualityJob {
 pub struct Trial {
     /// Quality reported (0 when the registration failed outright).
     pub quality: f64,
+    /// The free-space fraction reported (0 when not measured).
+    pub free_space: f64,
+    /// Distance of the result from the truth (mm; infinite without a result).
+    pub error_mm: f64,
     /// Whether it failed (see the module docs).
     pub failed: bool,
 }
+
+/// A failure this far from the truth (mm) is gross: a pose that must never be
+/// published as tracked.
+pub const GROSS_MM: f64 = 200.0;
 
 /// Runs the measurement (object 0 of the configuration).
 pub fn run(config: &TrackerConfig, job: &QualityJob) -> Result<Vec<Trial>> {
@@ -79,6 +89,7 @@ pub fn run(config: &TrackerConfig, job: &QualityJob) -> Result<Vec<Trial>> {
     let mut judged = config.clone();
     judged.params.min_quality = 0.0;
     judged.params.min_quality_initialise = 0.0;
+    judged.params.max_free_space = 1.0;
     let pool = thread_pool(config.threads)?;
     let LoadedTracker { mut tracker, world_from_model } =
         load_tracker(&judged, &pool, cam.width as usize, cam.height as usize)?;
@@ -125,7 +136,8 @@ pub fn run(config: &TrackerConfig, job: &QualityJob) -> Result<Vec<Trial>> {
             let e = &out.estimates[0];
             let (mm, deg) = error(&e.camera_from_object.inverse(), &truth);
             let failed = e.quality <= 0.0 || mm > job.fail_mm || deg > job.fail_deg;
-            trials.push(Trial { quality: e.quality, failed });
+            let error_mm = if e.quality <= 0.0 { f64::INFINITY } else { mm };
+            trials.push(Trial { quality: e.quality, free_space: e.free_space, error_mm, failed });
         }
     }
     Ok(trials)
@@ -138,39 +150,119 @@ fn error(a: &Pose, b: &Pose) -> (f64, f64) {
     )
 }
 
-/// Precision and recall of "quality < threshold" as a failure detector.
-pub fn precision_recall(trials: &[Trial], threshold: f64) -> (f64, f64, usize, usize, usize) {
-    let (mut tp, mut fp, mut fn_) = (0, 0, 0);
+/// How a failure detector did: precision and recall for failures, and the counts.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Detection {
+    /// Flagged trials that failed, of all flagged (1 when none is flagged).
+    pub precision: f64,
+    /// Failed trials flagged, of all failed (1 when none failed).
+    pub recall: f64,
+    /// Trials flagged.
+    pub flagged: usize,
+    /// Failed trials not flagged.
+    pub missed: usize,
+    /// Of those, results farther than [`GROSS_MM`] from the truth.
+    pub missed_gross: usize,
+}
+
+/// Precision and recall of `flag` as a failure detector.
+pub fn detection(trials: &[Trial], flag: impl Fn(&Trial) -> bool) -> Detection {
+    let (mut tp, mut fp, mut missed, mut missed_gross) = (0, 0, 0, 0);
     for t in trials {
-        let flagged = t.quality < threshold;
-        match (flagged, t.failed) {
+        match (flag(t), t.failed) {
             (true, true) => tp += 1,
             (true, false) => fp += 1,
-            (false, true) => fn_ += 1,
+            (false, true) => {
+                missed += 1;
+                missed_gross += usize::from(t.error_mm > GROSS_MM);
+            }
             (false, false) => {}
         }
     }
-    let p = if tp + fp == 0 { 1.0 } else { tp as f64 / (tp + fp) as f64 };
-    let r = if tp + fn_ == 0 { 1.0 } else { tp as f64 / (tp + fn_) as f64 };
-    (p, r, tp, fp, fn_)
+    let precision = if tp + fp == 0 { 1.0 } else { tp as f64 / (tp + fp) as f64 };
+    let recall = if tp + missed == 0 { 1.0 } else { tp as f64 / (tp + missed) as f64 };
+    Detection { precision, recall, flagged: tp + fp, missed, missed_gross }
 }
 
-/// Prints the table.
-pub fn print(job: &QualityJob, trials: &[Trial], current: f64) {
+/// The thresholds of a table: `fixed`, and the configured one among them in order if it
+/// is not one of them.
+fn with_configured(fixed: &[f64], configured: f64) -> Vec<f64> {
+    let mut all = fixed.to_vec();
+    if !fixed.iter().any(|&t| (t - configured).abs() < 1e-9) {
+        all.push(configured);
+        all.sort_by(f64::total_cmp);
+    }
+    all
+}
+
+/// Prints the tables: the quality alone per threshold, then the tracker's rule (quality
+/// below `min_quality`, or free space above a threshold) per free-space threshold.
+pub fn print(job: &QualityJob, trials: &[Trial], min_quality: f64, max_free_space: f64) {
     let failures = trials.iter().filter(|t| t.failed).count();
+    let gross = trials.iter().filter(|t| t.failed && t.error_mm > GROSS_MM).count();
     println!(
-        "{} registrations from priors perturbed by up to {:.0} mm and {:.1}° per axis; {failures} failed (> {:.0} mm or > {:.0}° from the truth, or no result)",
+        "{} registrations from priors perturbed by up to {:.0} mm and {:.1}° per axis; {failures} failed (> {:.0} mm or > {:.0}° from the truth, or no result), {gross} of them by more than {GROSS_MM:.0} mm or with no result",
         trials.len(),
         job.max_shift_m * 1e3,
         job.max_turn_rad.to_degrees(),
         job.fail_mm,
         job.fail_deg
     );
-    println!("| quality below | flags | precision | recall |");
-    println!("|---|---|---|---|");
-    for threshold in [0.3, 0.4, 0.45, 0.5, 0.55, 0.6, 0.65, 0.7] {
-        let (p, r, tp, fp, _) = precision_recall(trials, threshold);
-        let mark = if (threshold - current).abs() < 1e-9 { " (min_quality)" } else { "" };
-        println!("| {threshold:.2}{mark} | {} | {p:.3} | {r:.3} |", tp + fp);
+    let row = |label: String, d: Detection| {
+        println!(
+            "| {label} | {} | {:.3} | {:.3} | {} | {} |",
+            d.flagged, d.precision, d.recall, d.missed, d.missed_gross
+        );
+    };
+    let header = |first: &str| {
+        println!("| {first} | flags | precision | recall | failures missed | missed > {GROSS_MM:.0} mm |");
+        println!("|---|---|---|---|---|---|");
+    };
+    println!("\nThe quality alone:\n");
+    header("quality below");
+    for threshold in with_configured(&[0.3, 0.4, 0.45, 0.5, 0.55, 0.6, 0.65, 0.7], min_quality) {
+        let mark = if (threshold - min_quality).abs() < 1e-9 { " (min_quality)" } else { "" };
+        row(format!("{threshold:.2}{mark}"), detection(trials, |t| t.quality < threshold));
+    }
+    println!("\nThe tracker's rule: quality below {min_quality} (min_quality), or free space above:\n");
+    header("free space above");
+    for threshold in with_configured(&[0.03, 0.05, 0.07, 0.1, 0.15, 0.2, 1.0], max_free_space) {
+        let mark = if (threshold - max_free_space).abs() < 1e-9 { " (max_free_space)" } else { "" };
+        let label =
+            if threshold >= 1.0 { format!("{threshold:.2} (off){mark}") } else { format!("{threshold:.2}{mark}") };
+        row(label, detection(trials, |t| t.quality < min_quality || t.free_space > threshold));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn trial(quality: f64, free_space: f64, error_mm: f64, failed: bool) -> Trial {
+        Trial { quality, free_space, error_mm, failed }
+    }
+
+    #[test]
+    fn detection_counts_flags_misses_and_gross_misses() {
+        let trials = [
+            trial(0.9, 0.01, 5.0, false),  // good, passes
+            trial(0.4, 0.01, 8.0, false),  // good, flagged by quality: a false alarm
+            trial(0.2, 0.0, 90.0, true),   // failed, flagged by quality
+            trial(0.8, 0.40, 450.0, true), // failed far off, flagged only by free space
+            trial(0.7, 0.02, 70.0, true),  // failed, missed by both
+        ];
+        let quality = detection(&trials, |t| t.quality < 0.5);
+        assert_eq!(quality, Detection { precision: 0.5, recall: 1.0 / 3.0, flagged: 2, missed: 2, missed_gross: 1 });
+        let rule = detection(&trials, |t| t.quality < 0.5 || t.free_space > 0.1);
+        assert_eq!(rule, Detection { precision: 2.0 / 3.0, recall: 2.0 / 3.0, flagged: 3, missed: 1, missed_gross: 0 });
+        let none = detection(&trials[..1], |_| false);
+        assert_eq!((none.precision, none.recall), (1.0, 1.0));
+    }
+
+    #[test]
+    fn the_configured_threshold_always_has_a_row() {
+        assert_eq!(with_configured(&[0.1, 0.2], 0.2), [0.1, 0.2]);
+        assert_eq!(with_configured(&[0.1, 0.2], 0.15), [0.1, 0.15, 0.2]);
+        assert_eq!(with_configured(&[0.1, 0.2], 1.0), [0.1, 0.2, 1.0]);
     }
 }

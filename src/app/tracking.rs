@@ -121,7 +121,7 @@ pub fn track_frame(
             let built = tracker.build_scene(k, frame);
             let t1 = Instant::now();
             out.estimates[k] = match built {
-                Ok(_) => tracker.register_object(k, frame.stamp_ns),
+                Ok(_) => tracker.register_object(k, frame),
                 Err(_) => tracker.invalid_frame(k, frame.stamp_ns),
             };
             out.build_ms[k] = (t1 - t0).as_secs_f32() * 1e3;
@@ -173,7 +173,7 @@ pub fn pose_message(name: &str, out: &StepOutput, k: usize, frame: (u64, u64), t
         build_ms: out.build_ms[k],
         register_ms: out.register_ms[k],
         total_ms,
-        reserved: 0,
+        free_space: e.free_space as f32,
         name: name_bytes,
     }
 }

@@ -240,7 +240,7 @@ pub fn eval(command: EvalCommand) -> Result<()> {
                 seed: a.seed,
             };
             let trials = app::quality_eval::run(&config, &job)?;
-            app::quality_eval::print(&job, &trials, config.params.min_quality);
+            app::quality_eval::print(&job, &trials, config.params.min_quality, config.params.max_free_space);
         }
         EvalCommand::Rpe { gt, est, delta, association, plot } => {
             check_plot(plot.as_deref(), &gt, &est)?;

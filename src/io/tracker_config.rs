@@ -18,6 +18,8 @@
 //! region_margin_px = 16.0
 //! min_quality = 0.5
 //! min_quality_initialise = 0.6
+//! max_free_space = 0.1         # failed when more of the model is seen through (1: off)
+//! free_space_margin_m = 0.02
 //! lost_after_frames = 3
 //! lm_max_iterations = 10
 //! newton_iterations = 2
@@ -145,6 +147,8 @@ struct RawTracker {
     region_margin_px: Option<f64>,
     min_quality: Option<f64>,
     min_quality_initialise: Option<f64>,
+    max_free_space: Option<f64>,
+    free_space_margin_m: Option<f64>,
     lost_after_frames: Option<u32>,
     lm_max_iterations: Option<usize>,
     newton_iterations: Option<usize>,
@@ -186,6 +190,8 @@ pub fn parse_tracker_config(text: &str, origin: &Path) -> Result<TrackerConfig, 
     params.region_margin_px = t.region_margin_px.unwrap_or(params.region_margin_px);
     params.min_quality = t.min_quality.unwrap_or(params.min_quality);
     params.min_quality_initialise = t.min_quality_initialise.unwrap_or(params.min_quality_initialise);
+    params.max_free_space = t.max_free_space.unwrap_or(params.max_free_space);
+    params.free_space_margin_m = t.free_space_margin_m.unwrap_or(params.free_space_margin_m);
     params.lost_after_frames = t.lost_after_frames.unwrap_or(params.lost_after_frames);
     params.registration.lm_max_iterations = t.lm_max_iterations.unwrap_or(params.registration.lm_max_iterations);
     params.registration.newton_iterations = t.newton_iterations.unwrap_or(params.registration.newton_iterations);
@@ -331,6 +337,13 @@ mod tests {
             let scale = GOOD.replace("[camera]", &format!("[tracker]\ncovariance_scale = {bad}\n[camera]"));
             assert!(parse_tracker_config(&scale, p).unwrap_err().to_string().contains("covariance_scale"), "{bad}");
         }
+        for (key, bad) in [("max_free_space", "1.5"), ("max_free_space", "-0.1"), ("free_space_margin_m", "0.0")] {
+            let text = GOOD.replace("[camera]", &format!("[tracker]\n{key} = {bad}\n[camera]"));
+            assert!(parse_tracker_config(&text, p).unwrap_err().to_string().contains(key), "{key} = {bad}");
+        }
+        let off = GOOD.replace("[camera]", "[tracker]\nmax_free_space = 1.0\nfree_space_margin_m = 0.03\n[camera]");
+        let params = parse_tracker_config(&off, p).expect("valid").params;
+        assert_eq!((params.max_free_space, params.free_space_margin_m), (1.0, 0.03));
         let scale = GOOD.replace("[camera]", "[tracker]\ncovariance_scale = 100.0\n[camera]");
         assert_eq!(parse_tracker_config(&scale, p).expect("valid").params.covariance_scale, 100.0);
         let twice = format!("{GOOD}{}", &GOOD[GOOD.find("[[object]]").expect("an object")..]);

@@ -296,8 +296,11 @@ pub struct ObjectPose {
     pub register_ms: f32,
     /// Time from receiving the frame to publishing this pose (ms).
     pub total_ms: f32,
-    /// Reserved (0).
-    pub reserved: u32,
+    /// The fraction of the model surfels facing the camera at this pose that the depth
+    /// image sees through (0 good; above the tracker's `max_free_space` the frame's
+    /// registration counted as failed). 0 when not measured. (Reserved and 0 before
+    /// mrsmap 0.1's stop 55: the same layout.)
+    pub free_space: f32,
     /// Object name, UTF-8, NUL-padded.
     pub name: [u8; 32],
 }

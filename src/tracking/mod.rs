@@ -7,7 +7,8 @@
 //!   → region of interest + pixel gate (extent.rs)
 //!   → scene map of those pixels (map::MapBuilder::build_region, §3.3)
 //!   → registration to the model (§4: LM, Newton, covariance Eq. 6)
-//!   → quality (fraction of scene surfels explained) → status (tracking / lost / initialising)
+//!   → quality (fraction of scene surfels explained) and free space (model surfels the
+//!     depth image sees through, free_space.rs) → status (tracking / lost / initialising)
 //! ```
 //!
 //! No I/O, clock or logging; every buffer is allocated by [`Tracker::new`]. The live
@@ -15,11 +16,13 @@
 //! stages, to time them).
 
 pub mod extent;
+pub mod free_space;
 pub mod object;
 pub mod params;
 pub mod tracker;
 
 pub use extent::{ExtentError, ModelExtent};
+pub use free_space::{FreeSpace, FreeSpaceProbe};
 pub use object::{ObjectModel, PoseEstimate, SearchRegion, TrackingStatus};
 pub use params::{CovarianceModel, TrackerParams, TrackerParamsError};
 pub use tracker::{Tracker, TrackerError};

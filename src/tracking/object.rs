@@ -1,6 +1,7 @@
 //! One tracked object: its model, its scene map, and its state (paper §5.2).
 
 use super::extent::ModelExtent;
+use super::free_space::FreeSpaceProbe;
 use crate::geometry::Pose;
 use crate::map::SurfelMap;
 use crate::registration::{MatchScratch, RegistrationWorkspace};
@@ -46,6 +47,10 @@ pub struct PoseEstimate {
     /// or more for a good fit, below about 0.5 for a failed one, 0 when the
     /// registration failed.
     pub quality: f64,
+    /// The fraction of the model surfels facing the camera at the estimate that the
+    /// depth image sees through ([`super::free_space`]): near 0 for a good pose; 0 when
+    /// not measured (no registration, or too little evidence).
+    pub free_space: f64,
     /// Surfel associations at the estimate.
     pub associations: usize,
     /// LM + Newton iterations.
@@ -76,6 +81,7 @@ impl PoseEstimate {
             camera_from_object: Pose::identity(),
             covariance_ros: Matrix6::identity(),
             quality: 0.0,
+            free_space: 0.0,
             associations: 0,
             iterations: 0,
             bad_frames: 0,
@@ -134,6 +140,8 @@ pub(crate) fn hypotheses(initial_camera_from_object: &Pose, search: &SearchRegio
 pub(crate) struct TrackedObject {
     pub model: SurfelMap,
     pub extent: ModelExtent,
+    /// The model surfels the free-space check projects.
+    pub free_space: FreeSpaceProbe,
     pub scene: SurfelMap,
     pub workspace: RegistrationWorkspace,
     pub scratch: MatchScratch,

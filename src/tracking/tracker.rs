@@ -1,5 +1,6 @@
 //! The per-frame tracking step (paper §5.2).
 
+use super::free_space::FreeSpaceProbe;
 use super::object::{ObjectModel, PoseEstimate, TrackedObject, TrackingStatus, hypotheses};
 use super::params::{TrackerParams, TrackerParamsError};
 use crate::frame::RgbdFrame;
@@ -77,6 +78,7 @@ impl Tracker {
             let object_from_camera = m.initial_camera_from_object.inverse();
             objects.push(TrackedObject {
                 hypotheses: hypotheses(&m.initial_camera_from_object, &m.search),
+                free_space: FreeSpaceProbe::new(&m.map),
                 model: m.map,
                 extent: m.extent,
                 scene,
@@ -140,7 +142,7 @@ impl Tracker {
     pub fn step(&mut self, frame: &RgbdFrame, out: &mut [PoseEstimate]) {
         for (k, estimate) in out.iter_mut().enumerate().take(self.objects.len()) {
             *estimate = match self.build_scene(k, frame) {
-                Ok(_) => self.register_object(k, frame.stamp_ns),
+                Ok(_) => self.register_object(k, frame),
                 Err(_) => self.invalid_frame(k, frame.stamp_ns),
             };
         }
@@ -163,19 +165,25 @@ impl Tracker {
     }
 
     /// Stage 2 for object `k`: register the scene map to the model from the prior
-    /// (§4) and update the object's state from the result's quality.
-    pub fn register_object(&mut self, k: usize, stamp_ns: u64) -> PoseEstimate {
+    /// (§4), check the result against the frame's free space, and update the object's
+    /// state from both checks.
+    pub fn register_object(&mut self, k: usize, frame: &RgbdFrame) -> PoseEstimate {
         let p = &self.params;
         let object = &mut self.objects[k];
         let result = register(&object.model, &object.scene, &object.prior, &p.registration, &mut object.workspace);
-        let quality = match &result {
-            Ok(r) => quality(object, &r.model_from_scene, p.registration.covariance_regularization),
-            Err(_) => 0.0,
+        let (quality, free_space) = match &result {
+            Ok(r) => (
+                quality(object, &r.model_from_scene, p.registration.covariance_regularization),
+                object.free_space.measure(frame, &r.model_from_scene.inverse(), p.free_space_margin_m).fraction(),
+            ),
+            Err(_) => (0.0, 0.0),
         };
         let min_quality = if object.tracking { p.min_quality } else { p.min_quality_initialise };
-        let status = update_state(object, &result, quality >= min_quality, p.lost_after_frames);
-        let mut e = estimate(k, stamp_ns, status, object, result.ok().as_ref(), p);
+        let good = quality >= min_quality && free_space <= p.max_free_space;
+        let status = update_state(object, &result, good, p.lost_after_frames);
+        let mut e = estimate(k, frame.stamp_ns, status, object, result.ok().as_ref(), p);
         e.quality = quality;
+        e.free_space = free_space;
         e
     }
 

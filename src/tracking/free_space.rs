@@ -1,0 +1,249 @@
+//! The free-space check of a tracked pose (our addition to §5.2).
+//!
+//! The quality score asks how well the model explains the scene map; the scene map holds
+//! only the pixels the gate kept around the predicted pose, so a pose far off can still
+//! find a part of it to explain. The depth image also says where the object is *not*:
+//! where a model surface faces the camera at the estimated pose, the depth measured
+//! along its pixel's ray must not lie beyond it, or the camera sees through the object.
+//!
+//! For every usable model surfel of one level (2.5 cm cells for a model of the default
+//! finest resolution) whose normal faces the camera, the surfel's mean is projected into
+//! the depth image at `camera_from_object`, and the depth measured at that pixel is
+//! compared with the mean's: within `margin` of it the surfel is *supported*; more than
+//! `margin` beyond it, the camera sees through the surfel (*violated*); nearer, something
+//! occludes it (no evidence either way), and where there is no measurement there is
+//! none. The fraction of violated among supported and violated surfels is near 0 at a
+//! good pose (median 0.007 on fr3_teddy) and large where the pose puts the model in
+//! front of the background (docs/evaluation.md, "The free-space check").
+//!
+//! The check reads a few thousand pixels of the frame and allocates nothing: the model
+//! surfels it projects are gathered once, by [`FreeSpaceProbe::new`].
+
+use crate::frame::RgbdFrame;
+use crate::geometry::Pose;
+use crate::map::SurfelMap;
+use nalgebra::{Point3, Vector3};
+
+/// The model level whose surfels are projected (clamped to the model's levels): 2.5 cm
+/// cells at the default finest resolution of 1.25 cm, about 3 000 surfels for the teddy.
+pub const FREE_SPACE_LEVEL: usize = 1;
+
+/// A surfel counts as facing the camera when the cosine between its normal and the ray
+/// back to the camera exceeds this (within about 73°): at grazing angles a small error
+/// of the pose moves the projected pixel onto the background.
+const MIN_FACING_COS: f32 = 0.3;
+
+/// Below this many supported and violated surfels together (the object is mostly
+/// occluded, out of view or without depth) the check abstains.
+pub const MIN_EVIDENCE: u32 = 20;
+
+/// The model surfels the check projects: their means and normals in the object frame.
+#[derive(Debug, Clone)]
+pub struct FreeSpaceProbe {
+    points: Vec<(Vector3<f32>, Vector3<f32>)>,
+}
+
+/// What the depth image says about the model at a pose.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct FreeSpace {
+    /// Surfels with a depth measurement within the margin of their own depth.
+    pub supported: u32,
+    /// Surfels the camera sees through: the measured depth lies beyond them.
+    pub violated: u32,
+}
+
+impl FreeSpace {
+    /// The fraction of violated surfels among those with evidence; 0 when there are
+    /// fewer than [`MIN_EVIDENCE`] (the check abstains).
+    pub fn fraction(&self) -> f64 {
+        let evidence = self.supported + self.violated;
+        if evidence < MIN_EVIDENCE { 0.0 } else { f64::from(self.violated) / f64::from(evidence) }
+    }
+}
+
+impl FreeSpaceProbe {
+    /// Gathers the usable surfels of `model` at [`FREE_SPACE_LEVEL`] (or its coarsest
+    /// level, if it has fewer).
+    pub fn new(model: &SurfelMap) -> Self {
+        let level = FREE_SPACE_LEVEL.min(model.num_levels().saturating_sub(1));
+        let points = model
+            .surfels()
+            .iter()
+            .zip(model.normals())
+            .filter(|(s, _)| s.usable() && s.level as usize == level)
+            .map(|(s, n)| (s.mean, *n))
+            .collect();
+        FreeSpaceProbe { points }
+    }
+
+    /// Number of surfels projected.
+    pub fn len(&self) -> usize {
+        self.points.len()
+    }
+
+    /// Whether the probe has no surfel (the check then always abstains).
+    pub fn is_empty(&self) -> bool {
+        self.points.is_empty()
+    }
+
+    /// Projects the surfels into `frame` at `camera_from_object` and counts the
+    /// supported and violated ones (`margin_m`: the depth tolerance in metres).
+    pub fn measure(&self, frame: &RgbdFrame, camera_from_object: &Pose, margin_m: f64) -> FreeSpace {
+        let camera = &frame.camera;
+        if camera.is_distorted() {
+            self.count(frame, camera_from_object, margin_m, |p| camera.project(&Point3::from(p.cast::<f64>())))
+        } else {
+            // The pinhole projection inline (`CameraModel::project` without a lens model).
+            let i = camera.intrinsics;
+            let (fx, fy, cx, cy) = (i.fx as f32, i.fy as f32, i.cx as f32, i.cy as f32);
+            self.count(frame, camera_from_object, margin_m, |p| {
+                let inv_z = 1.0 / p.z;
+                Some((f64::from(fx * p.x * inv_z + cx), f64::from(fy * p.y * inv_z + cy)))
+            })
+        }
+    }
+
+    /// [`Self::measure`] with the projection `project` of camera-frame points in front of
+    /// the camera (in single precision: a pixel's worth of rounding is far below the
+    /// margin).
+    fn count(
+        &self,
+        frame: &RgbdFrame,
+        camera_from_object: &Pose,
+        margin_m: f64,
+        project: impl Fn(&Vector3<f32>) -> Option<(f64, f64)>,
+    ) -> FreeSpace {
+        let rotation = camera_from_object.rotation.to_rotation_matrix().into_inner().cast::<f32>();
+        let translation = camera_from_object.translation.vector.cast::<f32>();
+        let (width, height) = (frame.camera.width as f64, frame.camera.height as f64);
+        let (scale, margin) = (frame.camera.depth_scale_m as f32, margin_m as f32);
+        let mut out = FreeSpace::default();
+        for (mean, normal) in &self.points {
+            let p = rotation * mean + translation;
+            // In front of the camera, the normal facing it: n · (0 − p) > cos · |p|.
+            if p.z <= 0.0 || -(rotation * normal).dot(&p) <= MIN_FACING_COS * p.norm() {
+                continue;
+            }
+            let Some((u, v)) = project(&p) else { continue };
+            let (u, v) = (u.round(), v.round());
+            // Also rejects NaN.
+            if !(u >= 0.0 && v >= 0.0 && u < width && v < height) {
+                continue;
+            }
+            let raw = frame.depth[v as usize * frame.width() + u as usize];
+            if raw == 0 {
+                continue;
+            }
+            let measured = f32::from(raw) * scale;
+            if measured > p.z + margin {
+                out.violated += 1;
+            } else if measured >= p.z - margin {
+                out.supported += 1;
+            }
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::{CameraModel, NO_DISTORTION, PinholeIntrinsics};
+    use nalgebra::{Translation3, UnitQuaternion};
+
+    /// A probe of a square patch of surfels in the object's `z = 0` plane, normals +z,
+    /// 2 cm apart.
+    fn patch() -> FreeSpaceProbe {
+        let mut points = Vec::new();
+        for i in -5..=5 {
+            for j in -5..=5 {
+                points.push((Vector3::new(i as f32 * 0.02, j as f32 * 0.02, 0.0), Vector3::z()));
+            }
+        }
+        FreeSpaceProbe { points }
+    }
+
+    fn camera() -> CameraModel {
+        CameraModel {
+            width: 64,
+            height: 48,
+            intrinsics: PinholeIntrinsics { fx: 50.0, fy: 50.0, cx: 31.5, cy: 23.5 },
+            distortion: NO_DISTORTION,
+            depth_scale_m: 0.001,
+        }
+    }
+
+    /// The patch 1 m in front of the camera, facing it (object +z towards the camera).
+    fn facing(distance_m: f64) -> Pose {
+        Pose::from_parts(
+            Translation3::new(0.0, 0.0, distance_m),
+            UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI),
+        )
+    }
+
+    fn measure(depth_mm: u16, pose: &Pose) -> FreeSpace {
+        let cam = camera();
+        let rgb = vec![0u8; 64 * 48 * 3];
+        let depth = vec![depth_mm; 64 * 48];
+        let frame = RgbdFrame::new(0, cam, &rgb, &depth).expect("a valid frame");
+        patch().measure(&frame, pose, 0.02)
+    }
+
+    #[test]
+    fn a_surface_where_the_model_is_supports_it() {
+        let f = measure(1000, &facing(1.0));
+        assert_eq!(f, FreeSpace { supported: 121, violated: 0 });
+        assert_eq!(f.fraction(), 0.0);
+        // Within the margin either way.
+        assert_eq!(measure(1015, &facing(1.0)).supported, 121);
+        assert_eq!(measure(985, &facing(1.0)).supported, 121);
+    }
+
+    #[test]
+    fn a_background_behind_the_model_violates_it() {
+        let f = measure(1500, &facing(1.0));
+        assert_eq!(f, FreeSpace { supported: 0, violated: 121 });
+        assert_eq!(f.fraction(), 1.0);
+    }
+
+    #[test]
+    fn an_occluder_or_no_depth_is_no_evidence() {
+        assert_eq!(measure(600, &facing(1.0)), FreeSpace::default());
+        assert_eq!(measure(0, &facing(1.0)), FreeSpace::default());
+    }
+
+    #[test]
+    fn surfels_facing_away_or_out_of_view_are_not_counted() {
+        // Turned away: the normals point away from the camera.
+        let away = Pose::from_parts(Translation3::new(0.0, 0.0, 1.0), UnitQuaternion::identity());
+        assert_eq!(measure(1500, &away), FreeSpace::default());
+        // Beside the image, and behind the camera.
+        let beside = Pose::from_parts(Translation3::new(5.0, 0.0, 1.0), facing(1.0).rotation);
+        assert_eq!(measure(1500, &beside), FreeSpace::default());
+        assert_eq!(measure(1500, &facing(-1.0)), FreeSpace::default());
+    }
+
+    #[test]
+    fn a_lens_model_is_projected_through() {
+        // A negligible distortion takes `CameraModel::project`: the same counts.
+        let mut cam = camera();
+        cam.distortion[0] = 1e-9;
+        let rgb = vec![0u8; 64 * 48 * 3];
+        let (mut depth, pose) = (vec![1000u16; 64 * 48], facing(1.0));
+        // The left half of the image sees far beyond the patch.
+        depth.chunks_mut(64).for_each(|row| row[..32].fill(1500));
+        let plain = RgbdFrame::new(0, camera(), &rgb, &depth).expect("a valid frame");
+        let lens = RgbdFrame::new(0, cam, &rgb, &depth).expect("a valid frame");
+        let (a, b) = (patch().measure(&plain, &pose, 0.02), patch().measure(&lens, &pose, 0.02));
+        assert_eq!(a, b);
+        assert!(a.supported > 40 && a.violated > 40, "{a:?}");
+    }
+
+    #[test]
+    fn too_little_evidence_abstains() {
+        let few = FreeSpace { supported: 0, violated: MIN_EVIDENCE - 1 };
+        assert_eq!(few.fraction(), 0.0);
+        let enough = FreeSpace { supported: 10, violated: 10 };
+        assert_eq!(enough.fraction(), 0.5);
+    }
+}
