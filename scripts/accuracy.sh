@@ -97,10 +97,10 @@ if awk -v m="$med" -v n="$n" 'BEGIN {exit !(m > 8.5 || n < 90)}'; then echo "  R
 # the tracker's rule (quality below min_quality, or free space above max_free_space).
 quality_table=$($BIN eval tracking-quality --config robot_config/tracker.toml --dataset "$DATA/fr3_teddy_first200" \
   --camera robot_config/cameras/tum_fr3.toml)
-q=$(echo "$quality_table" | grep "(min_quality)")
+q=$(echo "$quality_table" | grep "^| .*(min_quality)")
 echo "tracking quality < min_quality as failure detector: $q"
 if echo "$q" | awk -F'|' '{exit !($4 < 0.9 || $5 < 0.65)}'; then echo "  REGRESSION: guard is precision >= 0.9, recall >= 0.65"; status=1; fi
-r=$(echo "$quality_table" | grep "(max_free_space)")
+r=$(echo "$quality_table" | grep "^| .*(max_free_space)")
 echo "the tracker's rule (quality, or free space above max_free_space) as failure detector: $r"
 if echo "$r" | awk -F'|' '{exit !($4 < 0.9 || $5 < 0.8 || $7 > 0)}'; then
   echo "  REGRESSION: guard is precision >= 0.9, recall >= 0.8, no failure farther than 200 mm missed"; status=1
