@@ -251,3 +251,35 @@ fn a_pose_the_depth_image_sees_through_is_not_tracked() {
     assert_eq!((checked.quality, checked.free_space), (unchecked.quality, unchecked.free_space));
     assert!(checked.is_held(), "the frame's registration counts as failed: {checked:?}");
 }
+
+/// A camera that jumps 9 cm sideways and back (the motion reverses): the
+/// constant-velocity prediction is 18 cm off and its registration fails; the retry from
+/// the last pose (9 cm off) tracks the frame.
+#[test]
+fn a_failed_prediction_is_retried_from_the_last_pose() {
+    let mesh = room(5);
+    let cam = vga().halved();
+    let first = render_frame(&mesh, cam, &Pose::identity());
+    let jumped = render_frame(&mesh, cam, &left_increment(&Vector6::new(0.09, 0.0, 0.0, 0.0, 0.0, 0.0)));
+    let run = |retry_from_last_pose: bool| {
+        let params = TrackerParams { retry_from_last_pose, ..TrackerParams::default() };
+        let model = object_model(&[(&first, Pose::identity())]);
+        let mut tracker = Tracker::new(params, cam.width as usize, cam.height as usize, vec![model]).expect("tracker");
+        let out = [step(&mut tracker, &first, 0), step(&mut tracker, &jumped, 1), step(&mut tracker, &first, 2)];
+        for (k, e) in out.iter().enumerate() {
+            println!(
+                "retry {retry_from_last_pose}, frame {k}: {:?}, fresh {}, quality {:.2}",
+                e.status,
+                e.is_fresh(),
+                e.quality
+            );
+        }
+        out
+    };
+    let (without, with) = (run(false), run(true));
+    assert!(without[..2].iter().chain(&with[..2]).all(PoseEstimate::is_fresh), "the jump itself is tracked");
+    assert!(without[2].is_held(), "the prediction fails: {:?}", without[2]);
+    assert!(with[2].is_fresh(), "the retry tracks the frame: {:?}", with[2]);
+    let (mm, deg) = pose_error(&with[2].camera_from_object.inverse(), &Pose::identity());
+    assert!(mm < 2e-3 && deg < 0.25, "{:.2} mm {:.3}°", mm * 1e3, deg);
+}

@@ -8,7 +8,9 @@
 //!   → scene map of those pixels (map::MapBuilder::build_region, §3.3)
 //!   → registration to the model (§4: LM, Newton, covariance Eq. 6)
 //!   → quality (fraction of scene surfels explained) and free space (model surfels the
-//!     depth image sees through, free_space.rs) → status (tracking / lost / initialising)
+//!     depth image sees through, free_space.rs); if that fails from a constant-velocity
+//!     prediction, once more from the last pose
+//!   → status (tracking / lost / initialising)
 //! ```
 //!
 //! No I/O, clock or logging; every buffer is allocated by [`Tracker::new`]. The live

@@ -41,6 +41,10 @@ pub struct TrackerParams {
     pub lost_after_frames: u32,
     /// Predict the next pose by constant velocity.
     pub constant_velocity: bool,
+    /// When the registration from the constant-velocity prediction fails, build the
+    /// scene map and register once more from the last pose (the motion may have stopped
+    /// or turned; a failing frame then costs about twice the time).
+    pub retry_from_last_pose: bool,
     /// Which covariance of the registration is published.
     pub covariance: CovarianceModel,
     /// Multiplies the published covariance (variance units: 100 widens every standard
@@ -126,6 +130,7 @@ impl Default for TrackerParams {
             free_space_margin_m: 0.02,
             lost_after_frames: 3,
             constant_velocity: true,
+            retry_from_last_pose: true,
             covariance: CovarianceModel::Clustered,
             covariance_scale: 1.0,
         }

@@ -166,8 +166,32 @@ impl Tracker {
 
     /// Stage 2 for object `k`: register the scene map to the model from the prior
     /// (§4), check the result against the frame's free space, and update the object's
-    /// state from both checks.
+    /// state from both checks. When a registration from the constant-velocity
+    /// prediction fails, the scene map is built and registered once more from the last
+    /// pose (`TrackerParams::retry_from_last_pose`): the motion may have stopped or
+    /// turned.
     pub fn register_object(&mut self, k: usize, frame: &RgbdFrame) -> PoseEstimate {
+        let mut attempt = self.attempt(k, frame);
+        if !attempt.good && self.retries_from_last_pose(k) {
+            let object = &mut self.objects[k];
+            object.prior = object.object_from_camera;
+            let region = object.extent.region(&object.prior, &frame.camera, &self.params);
+            if self.builder.build_region(frame, &region, &mut object.scene).is_ok() {
+                attempt = self.attempt(k, frame);
+            }
+        }
+        let p = &self.params;
+        let object = &mut self.objects[k];
+        let status = update_state(object, &attempt.result, attempt.good, p.lost_after_frames);
+        let mut e = estimate(k, frame.stamp_ns, status, object, attempt.result.ok().as_ref(), p);
+        e.quality = attempt.quality;
+        e.free_space = attempt.free_space;
+        e
+    }
+
+    /// One registration of object `k`'s scene map from its prior, judged by its quality
+    /// and its free space.
+    fn attempt(&mut self, k: usize, frame: &RgbdFrame) -> Attempt {
         let p = &self.params;
         let object = &mut self.objects[k];
         let result = register(&object.model, &object.scene, &object.prior, &p.registration, &mut object.workspace);
@@ -179,12 +203,14 @@ impl Tracker {
             Err(_) => (0.0, 0.0),
         };
         let min_quality = if object.tracking { p.min_quality } else { p.min_quality_initialise };
-        let good = quality >= min_quality && free_space <= p.max_free_space;
-        let status = update_state(object, &result, good, p.lost_after_frames);
-        let mut e = estimate(k, frame.stamp_ns, status, object, result.ok().as_ref(), p);
-        e.quality = quality;
-        e.free_space = free_space;
-        e
+        Attempt { good: quality >= min_quality && free_space <= p.max_free_space, result, quality, free_space }
+    }
+
+    /// Whether a failed registration of object `k` is tried again from its last pose:
+    /// it is tracked and the prior was another pose (a constant-velocity prediction).
+    fn retries_from_last_pose(&self, k: usize) -> bool {
+        let object = &self.objects[k];
+        self.params.retry_from_last_pose && object.tracking && object.prior != object.object_from_camera
     }
 
     /// The estimate of object `k` for a frame that could not be used.
@@ -214,6 +240,15 @@ impl Tracker {
             object.object_from_camera = object.hypotheses[0];
         }
     }
+}
+
+/// A registration and how it was judged.
+struct Attempt {
+    result: Result<Registration, RegistrationError>,
+    quality: f64,
+    free_space: f64,
+    /// The quality reaches the threshold and the free space stays within its limit.
+    good: bool,
 }
 
 /// The matching log-likelihood gain per usable scene surfel at `object_from_camera`,
