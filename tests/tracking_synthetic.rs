@@ -283,3 +283,40 @@ fn a_failed_prediction_is_retried_from_the_last_pose() {
     let (mm, deg) = pose_error(&with[2].camera_from_object.inverse(), &Pose::identity());
     assert!(mm < 2e-3 && deg < 0.25, "{:.2} mm {:.3}°", mm * 1e3, deg);
 }
+
+/// After a loss the object is looked for around its last pose first: a camera that
+/// turns away and comes back to where tracking was lost is tracked again at once, far
+/// from the configured initial pose.
+#[test]
+fn a_lost_object_is_looked_for_where_it_was_last_seen() {
+    let mesh = room(5);
+    let cam = vga().halved();
+    let poses: Vec<Pose> =
+        (0..10).map(|k| left_increment(&(Vector6::new(0.008, -0.003, 0.006, 0.002, 0.004, 0.0) * k as f64))).collect();
+    let frames: Vec<RenderTarget> = poses.iter().map(|p| render_frame(&mesh, cam, p)).collect();
+    let away = render_frame(&mesh, cam, &left_increment(&Vector6::new(0.0, 0.0, 0.0, 0.0, 2.4, 0.0)));
+    let views = [(&frames[0], poses[0]), (&frames[9], poses[9])];
+    let run = |search_near_last_pose: bool| {
+        let params = TrackerParams { search_near_last_pose, ..TrackerParams::default() };
+        let mut tracker =
+            Tracker::new(params, cam.width as usize, cam.height as usize, vec![object_model(&views)]).expect("tracker");
+        for (k, t) in frames.iter().enumerate() {
+            assert!(step(&mut tracker, t, k as u64).is_fresh(), "frame {k}");
+        }
+        let lost: Vec<TrackingStatus> = (20..23).map(|k| step(&mut tracker, &away, k).status).collect();
+        assert_eq!(lost.last(), Some(&TrackingStatus::Lost));
+        // Back where it was lost: frames until tracked again (none within 20: 20).
+        let back = &frames[9];
+        let frames_to_track = (30..50).position(|k| step(&mut tracker, back, k).is_fresh()).unwrap_or(20);
+        (frames_to_track, tracker)
+    };
+    let ((near, mut tracker), (configured, _)) = (run(true), run(false));
+    println!(
+        "frames until tracked again: {near} (near the last pose first), {configured} (configured hypotheses only)"
+    );
+    assert_eq!(near, 0, "the first hypothesis is the last pose");
+    assert!(configured > near);
+    let e = step(&mut tracker, &frames[9], 60);
+    let (mm, _) = pose_error(&e.camera_from_object.inverse(), &poses[9]);
+    assert!(e.is_fresh() && mm < 2e-3, "{:.2} mm", mm * 1e3);
+}

@@ -19,8 +19,9 @@ pub enum TrackingStatus {
     /// Tracking was lost at this frame; re-initialisation starts with the next one. The
     /// pose is the last good one.
     Lost = 1,
-    /// Looking for the object from the configured initial pose and search region; the
-    /// pose is the hypothesis tried.
+    /// Looking for the object: its search region around the last pose before the loss
+    /// first (`TrackerParams::search_near_last_pose`), then around the configured
+    /// initial pose; the pose is the hypothesis tried.
     Initialising = 2,
     /// The frame could not be used (wrong size, no depth, bad intrinsics); the object's
     /// state is unchanged.
@@ -116,22 +117,35 @@ pub struct ObjectModel {
 /// The re-initialisation hypotheses (`object_from_camera`): the initial pose first,
 /// then shifted along ±x, ±y, ±z of the camera, then turned about the object's `z`.
 pub(crate) fn hypotheses(initial_camera_from_object: &Pose, search: &SearchRegion) -> Vec<Pose> {
-    let c = *initial_camera_from_object;
-    let mut out = vec![c];
+    let mut out = Vec::with_capacity(hypothesis_count(search));
+    fill_hypotheses(initial_camera_from_object, search, &mut out);
+    out
+}
+
+/// How many hypotheses a search region gives (the centre, 6 shifts, 2 turns).
+pub(crate) fn hypothesis_count(search: &SearchRegion) -> usize {
+    1 + if search.translation_m > 0.0 { 6 } else { 0 } + if search.yaw_rad > 0.0 { 2 } else { 0 }
+}
+
+/// [`hypotheses`] around `camera_from_object` into `out` (cleared first; no allocation
+/// within the capacity of [`hypothesis_count`]).
+pub(crate) fn fill_hypotheses(camera_from_object: &Pose, search: &SearchRegion, out: &mut Vec<Pose>) {
+    let c = *camera_from_object;
+    out.clear();
+    out.push(c.inverse());
     if search.translation_m > 0.0 {
         for axis in 0..3 {
             for sign in [1.0, -1.0] {
                 let shift = Vector3::ith(axis, sign * search.translation_m);
-                out.push(Pose::from_parts(Translation3::from(shift), UnitQuaternion::identity()) * c);
+                out.push((Pose::from_parts(Translation3::from(shift), UnitQuaternion::identity()) * c).inverse());
             }
         }
     }
     if search.yaw_rad > 0.0 {
         for sign in [1.0, -1.0] {
-            out.push(c * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), sign * search.yaw_rad));
+            out.push((c * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), sign * search.yaw_rad)).inverse());
         }
     }
-    out.iter().map(Pose::inverse).collect()
 }
 
 /// A tracked object: the model, the scene map and workspace reused every frame, and
@@ -145,8 +159,15 @@ pub(crate) struct TrackedObject {
     pub scene: SurfelMap,
     pub workspace: RegistrationWorkspace,
     pub scratch: MatchScratch,
-    /// Re-initialisation hypotheses (`object_from_camera`).
+    /// Re-initialisation hypotheses (`object_from_camera`) of the configured initial
+    /// pose and search region.
     pub hypotheses: Vec<Pose>,
+    /// The same search region around the last pose before tracking was lost, tried
+    /// first (empty until then, or with `TrackerParams::search_near_last_pose` off).
+    pub near_last: Vec<Pose>,
+    /// The search region.
+    pub search: SearchRegion,
+    /// The hypothesis to try next: an index into `near_last`, then `hypotheses`.
     pub next_hypothesis: usize,
     /// Last estimate (`object_from_camera`).
     pub object_from_camera: Pose,
@@ -158,4 +179,18 @@ pub(crate) struct TrackedObject {
     pub prior: Pose,
     /// A pose to try next instead of the next hypothesis (set by the caller).
     pub requested: Option<Pose>,
+}
+
+impl TrackedObject {
+    /// Re-initialisation hypothesis `i` (cyclic): those near the last pose first, then
+    /// the configured ones.
+    pub(crate) fn hypothesis(&self, i: usize) -> Pose {
+        let i = i % (self.near_last.len() + self.hypotheses.len());
+        if i < self.near_last.len() { self.near_last[i] } else { self.hypotheses[i - self.near_last.len()] }
+    }
+
+    /// The index after hypothesis `i`.
+    pub(crate) fn after(&self, i: usize) -> usize {
+        (i + 1) % (self.near_last.len() + self.hypotheses.len())
+    }
 }

@@ -45,6 +45,10 @@ pub struct TrackerParams {
     /// scene map and register once more from the last pose (the motion may have stopped
     /// or turned; a failing frame then costs about twice the time).
     pub retry_from_last_pose: bool,
+    /// When tracking is lost, re-initialisation first tries the object's search region
+    /// around its last pose, then around the configured initial pose (off: the
+    /// configured ones only).
+    pub search_near_last_pose: bool,
     /// Which covariance of the registration is published.
     pub covariance: CovarianceModel,
     /// Multiplies the published covariance (variance units: 100 widens every standard
@@ -131,6 +135,7 @@ impl Default for TrackerParams {
             lost_after_frames: 3,
             constant_velocity: true,
             retry_from_last_pose: true,
+            search_near_last_pose: true,
             covariance: CovarianceModel::Clustered,
             covariance_scale: 1.0,
         }

@@ -1,7 +1,9 @@
 //! The per-frame tracking step (paper §5.2).
 
 use super::free_space::FreeSpaceProbe;
-use super::object::{ObjectModel, PoseEstimate, TrackedObject, TrackingStatus, hypotheses};
+use super::object::{
+    ObjectModel, PoseEstimate, TrackedObject, TrackingStatus, fill_hypotheses, hypotheses, hypothesis_count,
+};
 use super::params::{TrackerParams, TrackerParamsError};
 use crate::frame::RgbdFrame;
 use crate::geometry::Pose;
@@ -78,6 +80,8 @@ impl Tracker {
             let object_from_camera = m.initial_camera_from_object.inverse();
             objects.push(TrackedObject {
                 hypotheses: hypotheses(&m.initial_camera_from_object, &m.search),
+                near_last: Vec::with_capacity(hypothesis_count(&m.search)),
+                search: m.search,
                 free_space: FreeSpaceProbe::new(&m.map),
                 model: m.map,
                 extent: m.extent,
@@ -158,7 +162,7 @@ impl Tracker {
         } else if object.tracking {
             predict(&object.object_from_camera, &object.motion, self.params.constant_velocity)
         } else {
-            object.hypotheses[object.next_hypothesis % object.hypotheses.len()]
+            object.hypothesis(object.next_hypothesis)
         };
         let region = object.extent.region(&object.prior, &frame.camera, &self.params);
         self.builder.build_region(frame, &region, &mut object.scene)
@@ -182,7 +186,7 @@ impl Tracker {
         }
         let p = &self.params;
         let object = &mut self.objects[k];
-        let status = update_state(object, &attempt.result, attempt.good, p.lost_after_frames);
+        let status = update_state(object, &attempt.result, attempt.good, p);
         let mut e = estimate(k, frame.stamp_ns, status, object, attempt.result.ok().as_ref(), p);
         e.quality = attempt.quality;
         e.free_space = attempt.free_space;
@@ -235,6 +239,7 @@ impl Tracker {
         for object in &mut self.objects {
             object.tracking = false;
             object.next_hypothesis = 0;
+            object.near_last.clear();
             object.bad_frames = 0;
             object.motion = Pose::identity();
             object.object_from_camera = object.hypotheses[0];
@@ -264,12 +269,13 @@ fn predict(object_from_camera: &Pose, motion: &Pose, constant_velocity: bool) ->
 }
 
 /// The state machine: tracking → (bad frames) → lost → initialising → (a good
-/// registration from a hypothesis) → tracking.
+/// registration from a hypothesis: near the last pose first, then the configured ones)
+/// → tracking.
 fn update_state(
     object: &mut TrackedObject,
     result: &Result<Registration, RegistrationError>,
     good: bool,
-    lost_after: u32,
+    params: &TrackerParams,
 ) -> TrackingStatus {
     match (object.tracking, good, result) {
         (_, true, Ok(r)) => {
@@ -286,9 +292,13 @@ fn update_state(
         (true, _, _) => {
             object.bad_frames += 1;
             object.motion = Pose::identity();
-            if object.bad_frames >= lost_after {
+            if object.bad_frames >= params.lost_after_frames {
                 object.tracking = false;
                 object.next_hypothesis = 0;
+                if params.search_near_last_pose {
+                    // Look where the object was last seen first (then where configured).
+                    fill_hypotheses(&object.object_from_camera.inverse(), &object.search, &mut object.near_last);
+                }
                 TrackingStatus::Lost
             } else {
                 TrackingStatus::Tracking
@@ -296,7 +306,7 @@ fn update_state(
         }
         (false, _, _) => {
             object.bad_frames += 1;
-            object.next_hypothesis = (object.next_hypothesis + 1) % object.hypotheses.len();
+            object.next_hypothesis = object.after(object.next_hypothesis);
             object.object_from_camera = object.prior;
             TrackingStatus::Initialising
         }
