@@ -226,8 +226,13 @@ pub enum ModelCommand {
 
 #[derive(Subcommand)]
 pub enum EvalCommand {
-    /// How well the tracker's quality signal detects failed registrations: precision and
-    /// recall against ground truth, from priors perturbed at random.
+    /// How well the tracker detects failed registrations: precision and recall against
+    /// ground truth, from priors perturbed at random.
+    ///
+    /// Two tables: the quality signal alone per threshold, and the tracker's rule
+    /// (quality below min_quality, or the depth image seeing through more than
+    /// max_free_space of the model) per free-space threshold, each with the failures
+    /// missed and those of them farther than 200 mm from the truth.
     TrackingQuality(QualityArgs),
     /// Relative pose error (translation) at a fixed frame delta.
     Rpe {
