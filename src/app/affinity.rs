@@ -98,23 +98,25 @@ pub fn plan(threads: usize, allowed: std::io::Result<Vec<usize>>) -> Placement {
 
 /// Restricts the calling thread to `cpu`.
 pub fn pin_current_thread(cpu: usize) -> std::io::Result<()> {
-    let mut set = CpuSet::new();
-    set.set(cpu);
-    sched_setaffinity(None, &set)?;
-    Ok(())
+    restrict_current_thread(&[cpu])
 }
 
 /// Lets the calling thread run on any of `cpus` again (an empty list changes nothing).
 pub fn allow_current_thread(cpus: &[usize]) {
-    if cpus.is_empty() {
-        return;
+    if !cpus.is_empty() {
+        // Best effort: the mask was the thread's own a moment ago.
+        let _ = restrict_current_thread(cpus);
     }
+}
+
+/// Sets the calling thread's affinity mask to `cpus`.
+fn restrict_current_thread(cpus: &[usize]) -> std::io::Result<()> {
     let mut set = CpuSet::new();
     for &c in cpus {
         set.set(c);
     }
-    // Best effort: the mask was the thread's own a moment ago.
-    let _ = sched_setaffinity(None, &set);
+    sched_setaffinity(None, &set)?;
+    Ok(())
 }
 
 #[cfg(test)]

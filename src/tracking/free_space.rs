@@ -76,16 +76,6 @@ impl FreeSpaceProbe {
         FreeSpaceProbe { points }
     }
 
-    /// Number of surfels projected.
-    pub fn len(&self) -> usize {
-        self.points.len()
-    }
-
-    /// Whether the probe has no surfel (the check then always abstains).
-    pub fn is_empty(&self) -> bool {
-        self.points.is_empty()
-    }
-
     /// Projects the surfels into `frame` at `camera_from_object` and counts the
     /// supported and violated ones (`margin_m`: the depth tolerance in metres).
     pub fn measure(&self, frame: &RgbdFrame, camera_from_object: &Pose, margin_m: f64) -> FreeSpace {

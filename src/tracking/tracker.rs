@@ -164,6 +164,13 @@ impl Tracker {
         } else {
             object.hypothesis(object.next_hypothesis)
         };
+        self.build_at_prior(k, frame)
+    }
+
+    /// The scene map of object `k` from the pixels of the region of interest around its
+    /// prior that the gate keeps (§5.2).
+    fn build_at_prior(&mut self, k: usize, frame: &RgbdFrame) -> Result<BuildReport, MapError> {
+        let object = &mut self.objects[k];
         let region = object.extent.region(&object.prior, &frame.camera, &self.params);
         self.builder.build_region(frame, &region, &mut object.scene)
     }
@@ -179,8 +186,7 @@ impl Tracker {
         if !attempt.good && self.retries_from_last_pose(k) {
             let object = &mut self.objects[k];
             object.prior = object.object_from_camera;
-            let region = object.extent.region(&object.prior, &frame.camera, &self.params);
-            if self.builder.build_region(frame, &region, &mut object.scene).is_ok() {
+            if self.build_at_prior(k, frame).is_ok() {
                 attempt = self.attempt(k, frame);
             }
         }
