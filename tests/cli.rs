@@ -564,6 +564,7 @@ fn offline_tracking_every_nth_frame() {
         max_frames: None,
         qvga: true,
         start_at_ground_truth: false,
+        reinitialise_at_ground_truth: false,
         trajectory: None,
         stop: Default::default(),
     };

@@ -23,6 +23,7 @@ pub mod recorder;
 pub mod render;
 pub mod replay;
 pub mod report;
+pub mod synth;
 pub mod track_dataset;
 pub mod tracker_process;
 pub mod tracking;

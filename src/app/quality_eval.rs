@@ -1,9 +1,11 @@
 //! `mrsmap eval tracking-quality`: how well the tracker's quality signal separates good
 //! registrations from failed ones, measured on a sequence with ground truth.
 //!
-//! The tracker first follows the object through the frames from its ground-truth start;
-//! the rigid alignment of that trajectory to the ground truth gives the true
-//! `object_from_camera` of every frame (the TUM ATE alignment). Then each frame is
+//! The tracker first follows the object through the frames from its ground-truth start
+//! (and from the ground truth again after each loss);
+//! the rigid alignment of that trajectory to the ground truth, by whole poses
+//! ([`align_poses`]: positions alone leave the rotation loose over a short or straight
+//! stretch), gives the true `object_from_camera` of every frame. Then each frame is
 //! registered again from `trials` priors perturbed at random around the truth. A
 //! registration *failed* if it ended farther than `fail_mm` (camera position in the
 //! object frame) or `fail_deg` from the truth, or did not converge at all; the quality
@@ -14,7 +16,7 @@
 
 use super::dataset::thread_pool;
 use super::tracking::{LoadedTracker, StepOutput, Workers, load_tracker, track_frame};
-use crate::eval::align_rigid;
+use crate::eval::align_poses;
 use crate::geometry::Pose;
 use crate::geometry::se3::left_increment;
 use crate::io::camera_file::read_camera;
@@ -22,8 +24,9 @@ use crate::io::frames::FrameLoader;
 use crate::io::tracker_config::TrackerConfig;
 use crate::io::tum::TumDataset;
 use crate::synthetic::Pcg32;
+use crate::tracking::TrackingStatus;
 use anyhow::{Context, Result, bail};
-use nalgebra::{Translation3, UnitQuaternion, Vector6};
+use nalgebra::Vector6;
 use std::path::PathBuf;
 
 /// What to measure.
@@ -64,12 +67,35 @@ pub struct Trial {
     pub failed: bool,
 }
 
+/// The lever of the pose alignment ([`align_poses`]): an orientation error weighs as a
+/// displacement of the points this far (m) ahead of the camera, where the object is.
+const ALIGNMENT_LEVER_M: f64 = 1.0;
+
 /// A failure this far from the truth (mm) is gross: a pose that must never be
 /// published as tracked.
 pub const GROSS_MM: f64 = 200.0;
 
-/// Runs the measurement (object 0 of the configuration).
-pub fn run(config: &TrackerConfig, job: &QualityJob) -> Result<Vec<Trial>> {
+/// The reference the trials are judged against: the tracked trajectory aligned to the
+/// ground truth, and how far the tracked poses lie from it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Reference {
+    /// Frames tracked (and aligned).
+    pub frames: usize,
+    /// Median distance of the tracked camera positions from the aligned truth (mm).
+    pub median_mm: f64,
+    /// Median angle of the tracked orientations from the aligned truth (degrees).
+    pub median_deg: f64,
+}
+
+/// The median of some values.
+fn median(values: impl Iterator<Item = f64>) -> f64 {
+    let mut v: Vec<f64> = values.collect();
+    v.sort_by(f64::total_cmp);
+    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
+}
+
+/// Runs the measurement (object 0 of the configuration): the reference and the trials.
+pub fn run(config: &TrackerConfig, job: &QualityJob) -> Result<(Reference, Vec<Trial>)> {
     let camera = read_camera(&job.camera)?;
     let dataset = TumDataset::open(&job.dataset).with_context(|| format!("opening {}", job.dataset.display()))?;
     let gt = dataset.groundtruth.as_ref().context("the quality measurement needs groundtruth.txt")?;
@@ -100,10 +126,15 @@ pub fn run(config: &TrackerConfig, job: &QualityJob) -> Result<Vec<Trial>> {
     // Pass 1: the tracked trajectory, aligned to the ground truth, is the truth.
     let mut estimates = Vec::new();
     let mut truths = Vec::new();
-    for entry in &frames {
+    for (index, entry) in frames.iter().enumerate() {
+        let g = gt.at_stamp_ns(entry.depth_stamp_ns);
+        // A lost object starts again at the truth: the reference covers every frame the
+        // tracker can follow it from a good prior.
+        if let Some(g) = g.filter(|_| index > 0 && out.estimates[0].status != TrackingStatus::Tracking) {
+            tracker.reinitialise(0, &(g.inverse() * world_from_model));
+        }
         let frame = pool.install(|| loader.load(entry))?;
         track_frame(&mut tracker, &pool, &frame, &mut out, Workers::Spin);
-        let g = gt.at_stamp_ns(entry.depth_stamp_ns);
         if let Some(g) = g.filter(|_| out.estimates[0].is_fresh()) {
             estimates.push((entry.clone(), out.estimates[0].camera_from_object.inverse()));
             truths.push(g);
@@ -112,10 +143,18 @@ pub fn run(config: &TrackerConfig, job: &QualityJob) -> Result<Vec<Trial>> {
     if estimates.len() < 3 {
         bail!("the object was tracked in only {} frames: no reference", estimates.len());
     }
-    let x: Vec<_> = estimates.iter().map(|e| e.1.translation.vector).collect();
-    let y: Vec<_> = truths.iter().map(|g| g.translation.vector).collect();
-    let (r, t) = align_rigid(&x, &y);
-    let world_from_object = Pose::from_parts(Translation3::from(t), UnitQuaternion::from_matrix(&r));
+    // Whole poses, not positions alone: over a short or straight stretch the camera
+    // centres leave the rotation about their line free, and the truth's orientation
+    // would be off by degrees.
+    let tracked: Vec<Pose> = estimates.iter().map(|e| e.1).collect();
+    let world_from_object = align_poses(&tracked, &truths, ALIGNMENT_LEVER_M);
+    let residuals: Vec<(f64, f64)> =
+        tracked.iter().zip(&truths).map(|(e, g)| error(e, &(world_from_object.inverse() * g))).collect();
+    let reference = Reference {
+        frames: tracked.len(),
+        median_mm: median(residuals.iter().map(|r| r.0)),
+        median_deg: median(residuals.iter().map(|r| r.1)),
+    };
     // Pass 2: registrations from perturbed priors.
     let mut rng = Pcg32::new(job.seed);
     let mut trials = Vec::new();
@@ -140,7 +179,7 @@ pub fn run(config: &TrackerConfig, job: &QualityJob) -> Result<Vec<Trial>> {
             trials.push(Trial { quality: e.quality, free_space: e.free_space, error_mm, failed });
         }
     }
-    Ok(trials)
+    Ok((reference, trials))
 }
 
 fn error(a: &Pose, b: &Pose) -> (f64, f64) {
@@ -197,7 +236,11 @@ fn with_configured(fixed: &[f64], configured: f64) -> Vec<f64> {
 
 /// Prints the tables: the quality alone per threshold, then the tracker's rule (quality
 /// below `min_quality`, or free space above a threshold) per free-space threshold.
-pub fn print(job: &QualityJob, trials: &[Trial], min_quality: f64, max_free_space: f64) {
+pub fn print(job: &QualityJob, reference: &Reference, trials: &[Trial], min_quality: f64, max_free_space: f64) {
+    println!(
+        "reference: the {} tracked frames aligned to the ground truth (whole poses); the tracked poses lie {:.1} mm and {:.2}° from it (medians)",
+        reference.frames, reference.median_mm, reference.median_deg
+    );
     let failures = trials.iter().filter(|t| t.failed).count();
     let gross = trials.iter().filter(|t| t.failed && t.error_mm > GROSS_MM).count();
     println!(

@@ -34,6 +34,9 @@ pub struct TrackDatasetJob {
     /// Start every object at its ground-truth pose (from the dataset's ground truth and
     /// the model's `world_from_model`) instead of the configured one.
     pub start_at_ground_truth: bool,
+    /// Before each frame, re-initialise every object that is not tracking at its
+    /// ground-truth pose (a perfect detector's answer).
+    pub reinitialise_at_ground_truth: bool,
     /// Write each object's `object_from_camera` trajectory here.
     pub trajectory: Option<PathBuf>,
     /// Stops the run before its next frame; the frames tracked so far are written.
@@ -60,6 +63,8 @@ pub struct ObjectResult {
     pub statuses: [usize; 4],
     /// Of the frames tracking, those whose registration failed (the pose held).
     pub held: usize,
+    /// Re-initialisations at the ground truth (`reinitialise_at_ground_truth`).
+    pub reinitialised: usize,
     /// Tracking time per frame (ms).
     pub track_ms: Vec<f64>,
     /// Accuracy against the ground truth, if the dataset has it.
@@ -106,6 +111,9 @@ pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<TrackDataset
             break;
         }
         bar.inc(1);
+        if job.reinitialise_at_ground_truth && index > 0 {
+            reinitialise_lost(&mut tracker, &out, gt_at(entry.depth_stamp_ns), &world_from_model, &mut results);
+        }
         match pool.install(|| loader.load(entry)) {
             Ok(frame) => track_frame(&mut tracker, &pool, &frame, &mut out, Workers::Spin),
             Err(e) => {
@@ -144,11 +152,32 @@ pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<TrackDataset
     Ok(TrackDatasetSummary { objects: results, interrupted, covariance: config.params.covariance })
 }
 
+/// Re-initialises every object whose last estimate was not tracking at its pose in
+/// `world_from_camera` (the ground truth of the coming frame, if it has one).
+fn reinitialise_lost(
+    tracker: &mut crate::tracking::Tracker,
+    out: &StepOutput,
+    world_from_camera: Option<Pose>,
+    world_from_model: &[Pose],
+    results: &mut [ObjectResult],
+) {
+    let Some(world_from_camera) = world_from_camera else { return };
+    for (k, r) in results.iter_mut().enumerate() {
+        if out.estimates[k].status != TrackingStatus::Tracking {
+            tracker.reinitialise(k, &(world_from_camera.inverse() * world_from_model[k]));
+            r.reinitialised += 1;
+        }
+    }
+}
+
 /// Prints the results.
 pub fn print_summary(summary: &TrackDatasetSummary) {
     for r in &summary.objects {
         let [t, l, i, v] = r.statuses;
         println!("{}: {t} frames tracking ({} held), {l} lost, {i} initialising, {v} invalid", r.name, r.held);
+        if r.reinitialised > 0 {
+            println!("  re-initialised at the ground truth before {} frames", r.reinitialised);
+        }
         if !r.track_ms.is_empty() {
             println!(
                 "  tracking time per frame: median {:.2} ms, p99 {:.2} ms",

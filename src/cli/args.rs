@@ -159,6 +159,12 @@ pub struct TrackArgs {
     /// world_from_model) instead of the configured camera_from_object.
     #[arg(long, requires = "dataset")]
     pub start_at_ground_truth: bool,
+    /// Offline: before each frame, re-initialise every object that is not tracking at its
+    /// ground-truth pose, as a perfect object detector would (`Tracker::reinitialise`).
+    /// Measures the tracker apart from its own search after a loss; the summary counts
+    /// the re-initialisations. Implies --start-at-ground-truth.
+    #[arg(long, requires = "dataset")]
+    pub reinitialise_at_ground_truth: bool,
     /// Offline: write object_from_camera per object (TUM format).
     #[arg(long, requires = "dataset")]
     pub trajectory: Option<PathBuf>,
@@ -493,6 +499,25 @@ pub struct TumToMcapArgs {
     #[arg(long, default_value_t = 0)]
     pub first_frame: usize,
     /// Convert at most this many frames.
+    #[arg(long, value_parser = at_least_one::<usize>)]
+    pub max_frames: Option<usize>,
+}
+
+#[derive(Args)]
+pub struct SynthArgs {
+    /// Scene file (TOML: camera, meshes, boxes, sensor, sequences; see scripts/scenes/).
+    #[arg(long)]
+    pub scene: PathBuf,
+    /// Folder that receives one TUM RGB-D folder per sequence (`OUT/<sequence>`).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Render only this sequence (repeat for several) [default: all of the scene's].
+    #[arg(long = "sequence")]
+    pub sequences: Vec<String>,
+    /// Replace sequence folders that exist.
+    #[arg(long)]
+    pub force: bool,
+    /// Render at most this many frames of each sequence.
     #[arg(long, value_parser = at_least_one::<usize>)]
     pub max_frames: Option<usize>,
 }

@@ -64,7 +64,8 @@ pub fn track(a: TrackArgs) -> Result<ExitCode> {
             every: a.every as usize,
             max_frames: a.max_frames.map(|m| m as usize),
             qvga: a.qvga,
-            start_at_ground_truth: a.start_at_ground_truth,
+            start_at_ground_truth: a.start_at_ground_truth || a.reinitialise_at_ground_truth,
+            reinitialise_at_ground_truth: a.reinitialise_at_ground_truth,
             trajectory: a.trajectory,
             stop: Stop::on_signals()?,
         };
@@ -239,8 +240,14 @@ pub fn eval(command: EvalCommand) -> Result<()> {
                 fail_deg: a.fail_deg,
                 seed: a.seed,
             };
-            let trials = app::quality_eval::run(&config, &job)?;
-            app::quality_eval::print(&job, &trials, config.params.min_quality, config.params.max_free_space);
+            let (reference, trials) = app::quality_eval::run(&config, &job)?;
+            app::quality_eval::print(
+                &job,
+                &reference,
+                &trials,
+                config.params.min_quality,
+                config.params.max_free_space,
+            );
         }
         EvalCommand::Rpe { gt, est, delta, association, plot } => {
             check_plot(plot.as_deref(), &gt, &est)?;
@@ -476,4 +483,21 @@ pub fn convert(c: ConvertCommand) -> Result<ExitCode> {
             Ok(exit_code(s.interrupted))
         }
     }
+}
+
+/// `mrsmap synth`.
+pub fn synth(a: SynthArgs) -> Result<ExitCode> {
+    let job = app::synth::SynthJob {
+        scene: a.scene,
+        out: a.out,
+        sequences: a.sequences,
+        force: a.force,
+        max_frames: a.max_frames,
+        stop: Stop::on_signals()?,
+    };
+    let summary = app::synth::run(&job)?;
+    for s in &summary.sequences {
+        println!("{}: {} frames in {}", s.name, s.frames, s.folder.display());
+    }
+    Ok(exit_code(summary.interrupted))
 }

@@ -118,7 +118,8 @@ fn png_into(data: &[u8], out: &mut Vec<u8>) -> Result<Decompressed, String> {
     Ok(Decompressed { width, height, format, big_endian: true })
 }
 
-fn jpeg_into(data: &[u8], out: &mut Vec<u8>) -> Result<Decompressed, String> {
+/// Decodes a JPEG into 8-bit RGB in `out` (also for the textures of synthetic meshes).
+pub(crate) fn jpeg_into(data: &[u8], out: &mut Vec<u8>) -> Result<Decompressed, String> {
     let options = DecoderOptions::default().jpeg_set_out_colorspace(ColorSpace::RGB);
     let mut decoder = JpegDecoder::new_with_options(ZCursor::new(data), options);
     decoder.decode_headers().map_err(|e| format!("JPEG: {e:?}"))?;

@@ -14,6 +14,7 @@ pub mod mcap_write;
 pub mod object_file;
 pub mod recording;
 pub mod ros2;
+pub mod scene_file;
 pub mod tracker_config;
 pub mod tum;
 pub mod wire;

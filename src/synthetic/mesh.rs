@@ -148,8 +148,16 @@ impl Mesh {
         mesh
     }
 
+    /// Scales every vertex about the origin.
+    pub fn scale(&mut self, factor: f64) {
+        for p in &mut self.positions {
+            *p *= factor;
+        }
+    }
+
     /// Loads a Wavefront OBJ with `v`, `vt` and triangular or polygonal `f` records; the
-    /// texture named by `map_Kd` in the material library is loaded if it is a PNG.
+    /// texture named by `map_Kd` in the material library is loaded if it is a PNG or a
+    /// JPEG (one texture per mesh: the first `map_Kd`).
     pub fn load_obj(path: &Path) -> Result<Mesh, MeshError> {
         let io = |p: &Path, e: String| MeshError::Io { path: p.to_path_buf(), message: e };
         let text = std::fs::read_to_string(path).map_err(|e| io(path, e.to_string()))?;
@@ -207,15 +215,29 @@ impl Mesh {
         if let Some(lib) = mtllib {
             let dir = path.parent().unwrap_or(Path::new("."));
             if let Ok(mtl) = std::fs::read_to_string(dir.join(&lib))
-                && let Some(tex) =
-                    mtl.lines().find_map(|l| l.trim().strip_prefix("map_Kd").map(|s| s.trim().to_string()))
-                && tex.to_lowercase().ends_with(".png")
+                && let Some(tex) = mtl.lines().find_map(|l| {
+                    // `map_Kd [options] file`: the file is the last word.
+                    l.trim().strip_prefix("map_Kd").and_then(|s| s.split_whitespace().last()).map(str::to_string)
+                })
             {
-                mesh.texture = Some(load_png_texture(&dir.join(tex))?);
+                let lower = tex.to_lowercase();
+                if lower.ends_with(".png") {
+                    mesh.texture = Some(load_png_texture(&dir.join(tex))?);
+                } else if lower.ends_with(".jpg") || lower.ends_with(".jpeg") {
+                    mesh.texture = Some(load_jpeg_texture(&dir.join(tex))?);
+                }
             }
         }
         Ok(mesh)
     }
+}
+
+fn load_jpeg_texture(path: &Path) -> Result<Texture, MeshError> {
+    let io = |e: String| MeshError::Io { path: path.to_path_buf(), message: e };
+    let bytes = std::fs::read(path).map_err(|e| io(e.to_string()))?;
+    let mut rgb = Vec::new();
+    let image = crate::io::compressed_image::jpeg_into(&bytes, &mut rgb).map_err(io)?;
+    Ok(Texture { width: image.width, height: image.height, rgb })
 }
 
 fn load_png_texture(path: &Path) -> Result<Texture, MeshError> {

@@ -4,9 +4,12 @@
 //! Used by tests, benchmarks and demos; nothing in the core depends on it.
 
 pub mod mesh;
+pub mod path;
 pub mod raster;
 pub mod scene;
+pub mod sensor;
 
 pub use mesh::{Mesh, MeshError};
-pub use raster::{RenderTarget, render};
+pub use raster::{RenderTarget, clear, draw, render};
 pub use scene::{Pcg32, room};
+pub use sensor::SensorModel;

@@ -32,13 +32,25 @@ impl RenderTarget {
 /// Renders `mesh` (in world coordinates) seen from `world_from_camera` into `target`,
 /// with `background` colour where nothing is hit. Points nearer than `near_m` are clipped.
 pub fn render(mesh: &Mesh, world_from_camera: &Pose, target: &mut RenderTarget, background: [u8; 3], near_m: f64) {
-    let cam = target.camera;
-    let (w, h) = (cam.width as i64, cam.height as i64);
+    clear(target, background);
+    draw(mesh, world_from_camera, target, near_m);
+}
+
+/// Empties `target`: no depth, `background` colour.
+pub fn clear(target: &mut RenderTarget, background: [u8; 3]) {
     target.zbuf.iter_mut().for_each(|z| *z = f32::INFINITY);
     target.depth.iter_mut().for_each(|d| *d = 0);
     for px in target.rgb.chunks_exact_mut(3) {
         px.copy_from_slice(&background);
     }
+}
+
+/// Draws `mesh` (in world coordinates) seen from `world_from_camera` over what `target`
+/// holds, hidden where an earlier mesh is nearer (one z-buffer for every mesh drawn since
+/// [`clear`]). Points nearer than `near_m` are clipped.
+pub fn draw(mesh: &Mesh, world_from_camera: &Pose, target: &mut RenderTarget, near_m: f64) {
+    let cam = target.camera;
+    let (w, h) = (cam.width as i64, cam.height as i64);
     let camera_from_world = world_from_camera.inverse();
     let k = cam.intrinsics;
     let verts: Vec<Vector3<f64>> =

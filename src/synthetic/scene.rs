@@ -30,6 +30,14 @@ impl Pcg32 {
     pub fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
         lo + (hi - lo) * (self.next_u32() as f64 / 4294967296.0)
     }
+
+    /// A standard normal sample (Box–Muller; one of the pair is used).
+    pub fn normal(&mut self) -> f64 {
+        // (0, 1]: the logarithm stays finite.
+        let u1 = (self.next_u32() as f64 + 1.0) / 4294967296.0;
+        let u2 = self.next_u32() as f64 / 4294967296.0;
+        (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+    }
 }
 
 /// A smooth pseudo-random colour field (sums of sines with random phases): texture that

@@ -4,7 +4,7 @@ use super::extent::ModelExtent;
 use super::free_space::FreeSpaceProbe;
 use crate::geometry::Pose;
 use crate::map::SurfelMap;
-use crate::registration::{MatchScratch, RegistrationWorkspace};
+use crate::registration::{MatchScratch, RegistrationParams, RegistrationWorkspace};
 use nalgebra::{Matrix6, Translation3, UnitQuaternion, Vector3};
 
 /// What a tracked object is doing, as published.
@@ -153,6 +153,9 @@ pub(crate) fn fill_hypotheses(camera_from_object: &Pose, search: &SearchRegion, 
 #[derive(Debug)]
 pub(crate) struct TrackedObject {
     pub model: SurfelMap,
+    /// The registration's parameters for this model's size
+    /// ([`super::TrackerParams::registration_for`]).
+    pub registration: RegistrationParams,
     pub extent: ModelExtent,
     /// The model surfels the free-space check projects.
     pub free_space: FreeSpaceProbe,

@@ -155,6 +155,21 @@ pub struct TrackerParamsError {
 }
 
 impl TrackerParams {
+    /// The registration parameters for an object whose model surfels lie within
+    /// `radius_m` of its frame's origin. A rotation about that origin by `ω` moves the
+    /// object's surface by up to `ω · radius_m`: the registration's limit on the rotation's
+    /// standard deviation is raised to what moves the surface as far as the translation's
+    /// limit (`max_translation_std_m / radius_m`), never lowered. A small object (a
+    /// 20 cm banana, a bottle whose turn about its axis only its label shows) is
+    /// constrained less in rotation than a scene, for the same accuracy of its surface.
+    pub fn registration_for(&self, radius_m: f64) -> RegistrationParams {
+        let mut r = self.registration;
+        if radius_m.is_finite() && radius_m > 0.0 {
+            r.max_rotation_std_rad = r.max_rotation_std_rad.max(r.max_translation_std_m / radius_m);
+        }
+        r
+    }
+
     /// Checks ranges; the error names the first bad parameter.
     pub fn validate(&self) -> Result<(), TrackerParamsError> {
         let err = |name, value: f64, expected| Err(TrackerParamsError { name, value, expected });
@@ -182,5 +197,26 @@ impl TrackerParams {
             return err("lost_after_frames", 0.0, ">= 1");
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_small_object_may_be_less_certain_in_rotation_never_a_large_one() {
+        let p = TrackerParams::default();
+        let (t, r) = (p.registration.max_translation_std_m, p.registration.max_rotation_std_rad);
+        // A 10 cm object: a turn that moves its surface by the translation's limit.
+        assert_eq!(p.registration_for(0.1).max_rotation_std_rad, t / 0.1);
+        // A 2 m scene keeps the registration's own limit (it is never lowered).
+        assert_eq!(p.registration_for(2.0).max_rotation_std_rad, r);
+        for radius in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+            assert_eq!(p.registration_for(radius), p.registration, "radius {radius}");
+        }
+        // Nothing else changes.
+        let small = p.registration_for(0.1);
+        assert_eq!(RegistrationParams { max_rotation_std_rad: r, ..small }, p.registration);
     }
 }

@@ -78,7 +78,9 @@ impl Tracker {
             let scene = SurfelMap::new(scene_params, capacity)
                 .map_err(|source| TrackerError::MapParams { name: m.name.clone(), source })?;
             let object_from_camera = m.initial_camera_from_object.inverse();
+            let radius_m = m.map.surfels().iter().filter(|s| s.usable()).map(|s| s.mean.norm()).fold(0.0f32, f32::max);
             objects.push(TrackedObject {
+                registration: params.registration_for(f64::from(radius_m)),
                 hypotheses: hypotheses(&m.initial_camera_from_object, &m.search),
                 near_last: Vec::with_capacity(hypothesis_count(&m.search)),
                 search: m.search,
@@ -204,7 +206,7 @@ impl Tracker {
     fn attempt(&mut self, k: usize, frame: &RgbdFrame) -> Attempt {
         let p = &self.params;
         let object = &mut self.objects[k];
-        let result = register(&object.model, &object.scene, &object.prior, &p.registration, &mut object.workspace);
+        let result = register(&object.model, &object.scene, &object.prior, &object.registration, &mut object.workspace);
         let (quality, free_space) = match &result {
             Ok(r) => (
                 quality(object, &r.model_from_scene, p.registration.covariance_regularization),
