@@ -1,0 +1,94 @@
+#!/usr/bin/env bash
+# The tracker on manipulation-sized objects with exact ground truth: a table with five
+# textured meshes (scripts/scenes/ycb_table.toml: the YCB banana and scissors, a drink
+# bottle, a cow, Suzanne; meshes from ../shared/data/meshes) rendered through a model of
+# a Kinect (`mrsmap synth`). For each object the mapping tool learns a model from the
+# `model` orbit; all five are then tracked together, in one tracker, along the held-out
+# `track` path (another height, approaches to 0.45 m, faster turns, more shake), started
+# at the ground truth. Then the tracker's failure detection is measured per object on
+# the same held-out frames (`mrsmap eval tracking-quality`), as for the teddy.
+#
+# Prints a table per object; fails on a regression beyond the guard values below
+# (docs/evaluation.md, "Objects a gripper picks up"), not on the figures themselves.
+#   scripts/synthetic_objects.sh [WORKDIR]   (default: a temporary folder, removed)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+MESHES=../shared/data/meshes
+[ -d "$MESHES" ] || { echo "synthetic_objects: $MESHES not found"; exit 1; }
+BIN=target/release/mrsmap
+CAMERA=robot_config/cameras/tum_fr3.toml
+SCENE=scripts/scenes/ycb_table.toml
+cargo build --release --quiet
+if [ $# -ge 1 ]; then OUT=$1; mkdir -p "$OUT"; else OUT=$(mktemp -d); trap 'rm -rf "$OUT"' EXIT; fi
+status=0
+
+$BIN synth --scene "$SCENE" --out "$OUT" --force
+frames=$(grep -vc '^#' "$OUT/track/associations.txt")
+
+# Models: one SLAM run of the model orbit per object (its volume of interest).
+echo "models from the model orbit:"
+objects="banana scissors bottle cow monkey"
+config="$OUT/tracker.toml"
+printf '[camera]\nservice = "mrsmap/synthetic"\n' > "$config"
+for o in $objects; do
+  $BIN map --dataset "$OUT/model" --camera $CAMERA --object "scripts/scenes/ycb_table/$o.toml" \
+    --out "$OUT/$o.mrsm" --force > "$OUT/map_$o.log" 2>&1 || { cat "$OUT/map_$o.log"; exit 1; }
+  printf "  %-9s %s\n" "$o" "$(sed -nE 's/.*model .* \(object frame\): [0-9]+ nodes, ([0-9]+ surfels), usable surfels per level \(finest first\) (\[[0-9, ]*\]).*/\1 (usable per level \2)/p' "$OUT/map_$o.log")"
+  # The configured pose is never used: every run starts at the ground truth.
+  object=$(printf '[[object]]\nname = "%s"\nmodel = "%s.mrsm"\ncamera_from_object = [0, 0, 1, 0, 0, 0, 1]\n' "$o" "$o")
+  echo "$object" >> "$config"
+  printf '[camera]\nservice = "mrsmap/synthetic"\n%s\n' "$object" > "$OUT/only_$o.toml"
+done
+echo "  (SLAM $(grep -o 'ATE vs ground truth.*' "$OUT/map_banana.log" | sed 's/ vs ground truth//'))"
+
+# All five in one tracker along the held-out path: once on its own from the ground-truth
+# start (a lost object is searched for around its last and its configured pose), once
+# with every lost object re-initialised at the ground truth, as a perfect detector would.
+$BIN track --config "$config" --dataset "$OUT/track" --camera $CAMERA --start-at-ground-truth \
+  > "$OUT/alone.log" 2>&1 || { cat "$OUT/alone.log"; exit 1; }
+$BIN track --config "$config" --dataset "$OUT/track" --camera $CAMERA --reinitialise-at-ground-truth \
+  --trajectory "$OUT/tracked.txt" > "$OUT/track.log" 2>&1 || { cat "$OUT/track.log"; exit 1; }
+echo
+echo "held-out path, $frames frames, all objects in one tracker:"
+for o in $objects; do
+  printf '  %-9s on its own: %s\n' "$o" "$(sed -nE "s/^$o: ([0-9]+) frames tracking \(([0-9]+) held\), ([0-9]+) lost.*/\1 frames tracking (\2 held), \3 lost/p" "$OUT/alone.log")"
+done
+echo "  with a perfect detector after each loss:"
+# Guards (regressions, not targets: measured 2026-12-01 and recorded in docs/evaluation.md):
+# frames estimated at least, ATE median at most (mm; the bottle's turn about its axis
+# is free, so its ATE is not guarded), precision and recall at least, gross failures
+# (> 200 mm) accepted at most.
+while read -r o min_fresh max_ate min_precision min_recall max_gross; do
+  block=$(sed -n "/^$o:/,/^[a-z]*:/p" "$OUT/track.log")
+  counts=$(echo "$block" | sed -nE "s/^$o: ([0-9]+) frames tracking \(([0-9]+) held\), ([0-9]+) lost, ([0-9]+) initialising.*/\1 \2 \3 \4/p")
+  read -r tracking held lost init <<< "$counts"
+  fresh=$((tracking - held))
+  ate=$(echo "$block" | sed -nE 's/.*ATE \(aligned\) median ([0-9.]+) mm, max ([0-9.]+) mm.*/\1 \2/p')
+  read -r ate_median ate_max <<< "${ate:-nan nan}"
+  reinit=$(echo "$block" | sed -nE 's/.*re-initialised at the ground truth before ([0-9]+) frames.*/\1/p')
+  if [ "$fresh" -ge 3 ]; then
+    quality=$($BIN eval tracking-quality --config "$OUT/only_$o.toml" --dataset "$OUT/track" --camera $CAMERA \
+      --first-frame 0 --frames "$frames" --trials 2 2>&1) || quality="error: $quality"
+    rule=$(echo "$quality" | { grep '(max_free_space)' || true; } | awk -F'|' '{print $4, $5, $7}')
+    trials=$(echo "$quality" | sed -nE 's/^([0-9]+) registrations from priors.* ([0-9]+) failed .*/\2 of \1 failed/p')
+  else
+    rule="nan nan nan"; trials="none"
+  fi
+  read -r precision recall gross <<< "${rule:-nan nan nan}"
+  printf '  %-9s estimated %3d of %d frames (%d held, %d lost, %d initialising, %3d re-initialised), ATE median %5s max %5s mm;\n              failure detection from perturbed priors (%s): precision %s recall %s, gross failures accepted %s\n' \
+    "$o" "$fresh" "$frames" "$held" "$lost" "$init" "${reinit:-0}" "$ate_median" "$ate_max" "$trials" "$precision" "$recall" "$gross"
+  if awk -v f="$fresh" -v a="$ate_median" -v p="$precision" -v r="$recall" -v g="$gross" \
+    -v mf="$min_fresh" -v ma="$max_ate" -v mp="$min_precision" -v mr="$min_recall" -v mg="$max_gross" \
+    'BEGIN { bad = f < mf; if (ma != "-") bad = bad || a == "nan" || a > ma;
+             if (mp != "-") bad = bad || p == "nan" || p < mp || r < mr || g > mg; exit !bad }'; then
+    echo "    REGRESSION: guard is >= $min_fresh frames estimated, ATE median <= $max_ate mm, precision >= $min_precision, recall >= $min_recall, gross accepted <= $max_gross"
+    status=1
+  fi
+done <<'TABLE'
+banana   140 25  0.9 0.9  0
+scissors 130 15  0.9 0.9  0
+bottle   200 -   0.9 0.9  3
+cow      220 11  0.9 0.85 2
+monkey   45  25  0.9 0.85 3
+TABLE
+exit $status
