@@ -15,6 +15,7 @@
 //! per threshold of each.
 
 use super::dataset::thread_pool;
+use super::report::percentile;
 use super::tracking::{LoadedTracker, StepOutput, Workers, load_tracker, track_frame};
 use crate::eval::align_poses;
 use crate::geometry::Pose;
@@ -87,13 +88,6 @@ pub struct Reference {
     pub median_deg: f64,
 }
 
-/// The median of some values.
-fn median(values: impl Iterator<Item = f64>) -> f64 {
-    let mut v: Vec<f64> = values.collect();
-    v.sort_by(f64::total_cmp);
-    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
-}
-
 /// Runs the measurement (object 0 of the configuration): the reference and the trials.
 pub fn run(config: &TrackerConfig, job: &QualityJob) -> Result<(Reference, Vec<Trial>)> {
     let camera = read_camera(&job.camera)?;
@@ -148,13 +142,10 @@ pub fn run(config: &TrackerConfig, job: &QualityJob) -> Result<(Reference, Vec<T
     // would be off by degrees.
     let tracked: Vec<Pose> = estimates.iter().map(|e| e.1).collect();
     let world_from_object = align_poses(&tracked, &truths, ALIGNMENT_LEVER_M);
-    let residuals: Vec<(f64, f64)> =
-        tracked.iter().zip(&truths).map(|(e, g)| error(e, &(world_from_object.inverse() * g))).collect();
-    let reference = Reference {
-        frames: tracked.len(),
-        median_mm: median(residuals.iter().map(|r| r.0)),
-        median_deg: median(residuals.iter().map(|r| r.1)),
-    };
+    let (mm, deg): (Vec<f64>, Vec<f64>) =
+        tracked.iter().zip(&truths).map(|(e, g)| error(e, &(world_from_object.inverse() * g))).unzip();
+    let reference =
+        Reference { frames: tracked.len(), median_mm: percentile(&mm, 0.5), median_deg: percentile(&deg, 0.5) };
     // Pass 2: registrations from perturbed priors.
     let mut rng = Pcg32::new(job.seed);
     let mut trials = Vec::new();

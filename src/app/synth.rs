@@ -8,7 +8,7 @@ use crate::geometry::{CameraModel, Pose};
 use crate::io::camera_file::read_camera;
 use crate::io::image::{write_depth16, write_rgb8};
 use crate::io::scene_file::{SceneSpec, SequenceSpec, read_scene};
-use crate::io::tum::{format_pose_line, format_stamp};
+use crate::io::tum::{format_pose, format_stamp, write_trajectory};
 use crate::synthetic::scene::{ColorField, add_box};
 use crate::synthetic::{Mesh, Pcg32, RenderTarget, clear, draw};
 use anyhow::{Context, Result, bail};
@@ -189,7 +189,6 @@ fn write_lists(
     let header = |what: &str| format!("# {what}\n# rendered by mrsmap synth from {}\n", job.scene.display());
     let (mut rgb, mut depth, mut assoc) =
         (header("color images\n# timestamp filename"), header("depth images\n# timestamp filename"), String::new());
-    let mut gt = header("ground truth trajectory (world_from_camera, exact)\n# timestamp tx ty tz qx qy qz qw");
     for (stamp_ns, _) in poses {
         let s = format_stamp(*stamp_ns);
         let _ = writeln!(rgb, "{s} rgb/{s}.png");
@@ -200,18 +199,23 @@ fn write_lists(
     // the last) at least every 10 ms, as motion capture records them: the readers
     // interpolate the ground truth across short gaps only.
     let first_ns = poses.first().map_or(0, |p| p.0);
-    for (k, (stamp_ns, pose)) in poses.iter().enumerate() {
-        let _ = writeln!(gt, "{}", format_pose_line(*stamp_ns, pose));
+    let mut gt = Vec::with_capacity(poses.len() * 5);
+    for (k, &(stamp_ns, pose)) in poses.iter().enumerate() {
+        gt.push((stamp_ns, pose));
         let next_ns = poses.get(k + 1).map_or(stamp_ns + GROUND_TRUTH_PERIOD_NS, |p| p.0);
         let steps = (next_ns - stamp_ns).div_ceil(GROUND_TRUTH_PERIOD_NS);
         for j in 1..=steps {
             let at_ns = stamp_ns + (next_ns - stamp_ns) * j / steps;
             if at_ns < next_ns || k + 1 == poses.len() {
-                let pose = sequence.path.world_from_camera((at_ns - first_ns) as f64 * 1e-9);
-                let _ = writeln!(gt, "{}", format_pose_line(at_ns, &pose));
+                gt.push((at_ns, sequence.path.world_from_camera((at_ns - first_ns) as f64 * 1e-9)));
             }
         }
     }
+    let gt_header = format!(
+        "ground truth trajectory (world_from_camera, exact)\nrendered by mrsmap synth from {}",
+        job.scene.display()
+    );
+    write_trajectory(&folder.join("groundtruth.txt"), &gt_header, &gt)?;
     let mut source = format!(
         "Synthetic RGB-D sequence {:?} rendered by `mrsmap synth --scene {}` ({} frames at {} Hz, seed {}).\n\
          Exact ground truth in groundtruth.txt. Sensor: {:?}.\nMeshes (world_from_mesh: tx ty tz qx qy qz qw):\n",
@@ -223,20 +227,13 @@ fn write_lists(
         scene.sensor,
     );
     for m in &scene.meshes {
-        let line = format_pose_line(0, &m.world_from_mesh);
-        let pose = line.split_once(' ').map_or(line.as_str(), |(_, pose)| pose);
+        let pose = format_pose(&m.world_from_mesh);
         let _ = writeln!(source, "  {} {} scale {}: {pose}", m.name, m.obj.display(), m.scale);
     }
     if let Some(i) = interrupted {
         let _ = writeln!(source, "{i}: the sequence is shorter than the scene's path");
     }
-    for (name, text) in [
-        ("rgb.txt", rgb),
-        ("depth.txt", depth),
-        ("associations.txt", assoc),
-        ("groundtruth.txt", gt),
-        ("SOURCE.txt", source),
-    ] {
+    for (name, text) in [("rgb.txt", rgb), ("depth.txt", depth), ("associations.txt", assoc), ("SOURCE.txt", source)] {
         let path = folder.join(name);
         std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))?;
     }

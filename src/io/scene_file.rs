@@ -201,6 +201,29 @@ enum Ramp<T> {
     FromTo([T; 2]),
 }
 
+impl<T: Copy> Ramp<T> {
+    /// The same ramp over `f(T)`.
+    fn map<U>(self, f: impl Fn(T) -> U) -> Ramp<U> {
+        match self {
+            Ramp::To(v) => Ramp::To(f(v)),
+            Ramp::FromTo([a, b]) => Ramp::FromTo([f(a), f(b)]),
+        }
+    }
+}
+
+/// A stretch's `[from, to]` from its ramp, if given, and `end`, where the stretch before
+/// ended (`None` for the first): a single value goes there from `end` (is constant on the
+/// first stretch), a missing one stays at `end`; `None` if neither is known.
+fn resolve<T: Copy>(ramp: Option<Ramp<T>>, end: Option<T>) -> Option<[T; 2]> {
+    match (ramp, end) {
+        (Some(Ramp::FromTo(pair)), _) => Some(pair),
+        (Some(Ramp::To(v)), Some(e)) => Some([e, v]),
+        (Some(Ramp::To(v)), None) => Some([v, v]),
+        (None, Some(e)) => Some([e, e]),
+        (None, None) => None,
+    }
+}
+
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawSegment {
@@ -325,26 +348,15 @@ fn camera_path(s: &RawSequence, seed: u64) -> Result<CameraPath, String> {
         let at = |what: &str| format!("stretch {} needs {what} (the first stretch sets every value)", i + 1);
         let before = segments.last();
         let ramp = |r: Option<Ramp<f64>>, end: Option<f64>, what: &str| -> Result<[f64; 2], String> {
-            let pair = match (r, end) {
-                (Some(Ramp::FromTo(pair)), _) => pair,
-                (Some(Ramp::To(v)), Some(e)) => [e, v],
-                (Some(Ramp::To(v)), None) => [v, v],
-                (None, Some(e)) => [e, e],
-                (None, None) => return Err(at(what)),
-            };
+            let pair = resolve(r, end).ok_or_else(|| at(what))?;
             if pair.iter().all(|v| v.is_finite()) {
                 Ok(pair)
             } else {
                 Err(format!("stretch {}: {what} not finite", i + 1))
             }
         };
-        let look_at = match (raw.look_at, before.map(|b| b.look_at[1])) {
-            (Some(Ramp::FromTo([a, b])), _) => [Vector3::from(a), Vector3::from(b)],
-            (Some(Ramp::To(v)), Some(e)) => [e, Vector3::from(v)],
-            (Some(Ramp::To(v)), None) => [Vector3::from(v); 2],
-            (None, Some(e)) => [e; 2],
-            (None, None) => return Err(at("look_at")),
-        };
+        let look_at = resolve(raw.look_at.map(|r| r.map(Vector3::from)), before.map(|b| b.look_at[1]))
+            .ok_or_else(|| at("look_at"))?;
         let segment = Segment {
             seconds: raw.seconds,
             azimuth_deg: ramp(raw.azimuth_deg, before.map(|b| b.azimuth_deg[1]), "azimuth_deg")?,

@@ -297,11 +297,14 @@ impl Trajectory {
 
 /// Formats one trajectory line.
 pub fn format_pose_line(stamp_ns: u64, pose: &Pose) -> String {
+    format!("{} {}", format_stamp(stamp_ns), format_pose(pose))
+}
+
+/// A pose as a trajectory line writes it: `tx ty tz qx qy qz qw`.
+pub fn format_pose(pose: &Pose) -> String {
     let t = pose.translation.vector;
     let q = pose.rotation.quaternion();
-    let mut s = format_stamp(stamp_ns);
-    let _ = write!(s, " {:.9} {:.9} {:.9} {:.9} {:.9} {:.9} {:.9}", t.x, t.y, t.z, q.i, q.j, q.k, q.w);
-    s
+    format!("{:.9} {:.9} {:.9} {:.9} {:.9} {:.9} {:.9}", t.x, t.y, t.z, q.i, q.j, q.k, q.w)
 }
 
 /// Writes a TUM trajectory file with a header comment, whole or not at all
