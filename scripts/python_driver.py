@@ -1,11 +1,16 @@
 #!/usr/bin/env python3
 """An independent camera driver and pose reader in Python (iceoryx2 from PyPI), written
 only from docs/wire-format.md: publishes the frames of a TUM clip to `mrsmap track` and
-reads the poses back from the blackboard. Exits non-zero unless every frame is tracked.
+reads the poses back from the blackboard. With --detections it also plays a detector:
+after frame 3 it sends the tracker a detection of the object 30 mm off its tracked pose
+along the camera's x axis (mode "always"), from which frame 4 must be tracked back to
+within 10 mm of frame 3's pose along x (between these frames the camera moves by up to
+4 mm along x, 20 mm along y). Exits non-zero unless every frame is tracked (and the detection was undone).
 
     pip install iceoryx2==0.10.0 numpy pillow
     mrsmap track --config robot_config/tracker.toml &
-    scripts/python_driver.py tests/data/fr3_teddy_8 --service mrsmap/camera0 --poses mrsmap/poses
+    scripts/python_driver.py tests/data/fr3_teddy_8 --service mrsmap/camera0 --poses mrsmap/poses \
+        --detections mrsmap/detections
 """
 import argparse, ctypes, pathlib, sys, time
 
@@ -55,6 +60,31 @@ class ObjectPose(ctypes.Structure):
         return "MrsmapObjectPose"
 
 
+class ObjectDetection(ctypes.Structure):
+    _fields_ = [("layout_version", ctypes.c_uint32), ("mode", ctypes.c_uint32),
+                ("frame_stamp_ns", ctypes.c_uint64), ("send_stamp_ns", ctypes.c_uint64),
+                ("translation_m", ctypes.c_double * 3), ("rotation_xyzw", ctypes.c_double * 4),
+                ("name", ctypes.c_uint8 * 32)]
+
+    @staticmethod
+    def type_name() -> str:
+        return "MrsmapObjectDetection"
+
+
+DETECTION_ALWAYS = 1  # docs/wire-format.md: 0 = when not tracking, 1 = always
+DETECTED_AFTER_FRAME = 3
+DETECTION_OFFSET_M = 0.03
+
+
+def detector(node, service: str):
+    name = iox2.ServiceName.new(service)
+    svc = (node.service_builder(name).publish_subscribe(ObjectDetection)
+           .enable_safe_overflow(True).subscriber_max_buffer_size(16)
+           .subscriber_max_borrowed_samples(2).history_size(0)
+           .max_publishers(8).max_subscribers(4).open_or_create())
+    return svc.publisher_builder().create()
+
+
 def frames(root: pathlib.Path):
     for line in (root / "associations.txt").read_text().splitlines():
         if line.startswith("#") or not line.strip():
@@ -68,8 +98,10 @@ def main() -> int:
     ap.add_argument("dataset", type=pathlib.Path)
     ap.add_argument("--service", default="mrsmap/camera0")
     ap.add_argument("--poses", default="mrsmap/poses")
+    ap.add_argument("--detections", help="also send a detection on this service")
     args = ap.parse_args()
     assert ctypes.sizeof(FrameHeader) == 144 and ctypes.sizeof(ObjectPose) == 456
+    assert ctypes.sizeof(ObjectDetection) == 112
 
     node = iox2.NodeBuilder.new().create(iox2.ServiceType.Ipc)
     name = iox2.ServiceName.new(args.service + "/rgbd/vga")
@@ -87,8 +119,11 @@ def main() -> int:
     reader = board.reader_builder().create()
     entry = reader.entry(ctypes.c_uint32(0), ObjectPose)
 
+    detections = detector(node, args.detections) if args.detections else None
     tracked = 0
     total = 0
+    undone = None
+    before = None
     for seq, (stamp, rgb_path, depth_path) in enumerate(frames(args.dataset)):
         rgb = np.asarray(Image.open(rgb_path).convert("RGB"), dtype=np.uint8)
         depth = np.asarray(Image.open(depth_path), dtype=np.uint16)
@@ -117,7 +152,23 @@ def main() -> int:
               f"free space {pose.free_space:.3f} camera_from_object t = [{t[0]:+.3f}, {t[1]:+.3f}, {t[2]:+.3f}]")
         # Estimated from this frame: status tracking and no bad frame (else a held pose).
         tracked += pose.status == 0 and pose.bad_frames == 0
+        if detections is not None and seq == DETECTED_AFTER_FRAME:
+            before = t
+            shifted = (ctypes.c_double * 3)(t[0] + DETECTION_OFFSET_M, t[1], t[2])
+            d = ObjectDetection(LAYOUT_VERSION, DETECTION_ALWAYS, stamp, time.time_ns(), shifted,
+                                (ctypes.c_double * 4)(*pose.rotation_xyzw),
+                                (ctypes.c_uint8 * 32)(*bytes(pose.name)))
+            detections.send_copy(d)
+            print(f"detection sent: {name} {DETECTION_OFFSET_M * 1e3:.0f} mm off its pose in frame {seq}")
+        elif detections is not None and seq == DETECTED_AFTER_FRAME + 1:
+            moved = t[0] - before[0]
+            undone = abs(moved) < 0.010
+            print(f"frame {seq}, tracked from the detection: {moved * 1e3:+.1f} mm along x from frame "
+                  f"{seq - 1}'s pose (the detection was {DETECTION_OFFSET_M * 1e3:+.0f} mm)")
     print(f"{tracked}/{total} frames tracked")
+    if detections is not None and not undone:
+        print("the pose after the detection did not come back to the object", file=sys.stderr)
+        return 1
     return 0 if tracked == total else 1
 
 

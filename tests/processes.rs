@@ -1,6 +1,6 @@
 //! The camera driver, the tracker and the pose client as separate processes: poses
 //! against ground truth, faults (bad frames, a killed driver, missing or corrupt models),
-//! clean shutdown on SIGTERM and SIGINT.
+//! clean shutdown on SIGTERM and SIGINT, and a detector that re-initialises a lost object.
 
 mod common;
 
@@ -11,7 +11,7 @@ use mrsmap::io::frames::FrameLoader;
 use mrsmap::io::ipc;
 use mrsmap::io::tracker_config::read_tracker_config;
 use mrsmap::io::tum::{Trajectory, TumDataset};
-use mrsmap::io::wire::{FrameHeader, ObjectPose, RgbdFrameVga, status, write_frame};
+use mrsmap::io::wire::{FrameHeader, ObjectDetection, ObjectPose, RgbdFrameVga, detection_mode, status, write_frame};
 use std::io::{BufRead, BufReader};
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
@@ -262,6 +262,99 @@ fn bad_frames_are_reported_invalid_and_a_killed_driver_is_survived() {
     let (code, out) = finish(tracker, 30);
     assert_eq!(code, Some(0), "clean shutdown on SIGINT: {out}");
     assert!(out.contains("refused as invalid"), "{out}");
+}
+
+/// Runs `mrsmap ARGS` to its end while `send` feeds the tracker frames; returns whether
+/// it succeeded, and its stdout.
+fn run_while_sending(args: &[&str], send: &mut dyn FnMut()) -> (bool, String) {
+    let (mut child, _) = start(args);
+    let deadline = std::time::Instant::now() + Duration::from_secs(30);
+    let exit = loop {
+        if let Some(exit) = child.0.try_wait().expect("wait") {
+            break exit;
+        }
+        assert!(std::time::Instant::now() < deadline, "mrsmap {args:?} did not exit");
+        send();
+        std::thread::sleep(Duration::from_millis(30));
+    };
+    let mut out = String::new();
+    std::io::Read::read_to_string(&mut child.0.stdout.take().expect("stdout"), &mut out).expect("reads");
+    (exit.success(), out)
+}
+
+#[test]
+fn a_detection_finds_an_object_the_tracker_could_not() {
+    // The configured pose is 0.4 m off and there is no search region: on its own the
+    // tracker never finds the teddy. `mrsmap detect` with its true pose (in the clip's
+    // first frame, which the driver below sends over and over) makes it track.
+    let dir = temp_dir("detections");
+    let text = tracker_config_text("detect", "")
+        .replace("camera_from_object = [0.1923,", "camera_from_object = [0.5923,")
+        .replace("search_translation_m = 0.05\nsearch_yaw_deg = 20.0", "");
+    let config_path = dir.join("tracker.toml");
+    std::fs::write(&config_path, text).expect("write config");
+    let config = read_tracker_config(&config_path).expect("config");
+    let (tracker, tracker_err) = start(&["track", "--config", path(&config_path)]);
+    wait_for(&tracker_err, "ready", 60);
+    let driver = TestDriver::new(&config.camera_service);
+    let node = ipc::node("test_detector").expect("node");
+    let poses = ipc::open_poses(&node, &config.poses_service).expect("the tracker created the blackboard");
+    let reader = poses.reader_builder().create().expect("reader");
+    let entry = reader.entry::<ObjectPose>(&0).expect("object 0");
+    let mut sequence = 0;
+    let mut send = || {
+        sequence += 1;
+        driver.send(sequence, |_| {});
+        read_pose(&entry, sequence)
+    };
+    assert_eq!(send().status, status::INITIALISING, "not found at the configured pose");
+    // Detections the tracker must not apply: too old, of an unknown object, broken.
+    let publisher = ipc::detections(&node, &config.detections_service).expect("service").publisher_builder().create();
+    let publisher = publisher.expect("publisher");
+    let truth = mrsmap::geometry::Pose::from_parts(
+        nalgebra::Translation3::new(0.1923, 0.1253, 1.0402),
+        nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(-0.13797, -0.25098, -0.79599, 0.53327)),
+    );
+    let frame_stamp_ns = driver.header.capture_stamp_ns;
+    let always = detection_mode::ALWAYS;
+    let stale = ObjectDetection::new("teddy", &truth, frame_stamp_ns - 2_000_000_000, always);
+    let stranger = ObjectDetection::new("bear", &truth, frame_stamp_ns, always);
+    let broken = ObjectDetection { translation_m: [f64::NAN, 0.0, 1.0], ..stale };
+    for d in [stale, stranger, broken] {
+        publisher.send_copy(d).expect("sent");
+    }
+    assert_eq!(send().status, status::INITIALISING, "none of them applied");
+    let seen = wait_for(&tracker_err, "a detection refused", 10).join("\n");
+    assert!(seen.contains("its frame is 2.000 s older") && seen.contains("'bear' ignored"), "{seen}");
+    // The detector client, as a robot's detector would send it (a process of its own).
+    let q = truth.rotation.quaternion();
+    let t = truth.translation.vector;
+    let pose: Vec<String> = [t.x, t.y, t.z, q.i, q.j, q.k, q.w].iter().map(|v| v.to_string()).collect();
+    let mut args = vec!["detect", "--object", "teddy", "--service", &config.detections_service];
+    args.extend(["--poses", &config.poses_service, "--frame-stamp-ns"]);
+    let stamp = frame_stamp_ns.to_string();
+    args.push(&stamp);
+    args.push("--pose");
+    args.extend(pose.iter().map(String::as_str));
+    let (ok, out) = run_while_sending(&args, &mut || {
+        send();
+    });
+    assert!(ok, "{out}");
+    let mm: f64 =
+        out.split(" mm and").next().and_then(|s| s.rsplit(' ').next()).and_then(|v| v.parse().ok()).expect(&out);
+    println!("{out}");
+    assert!(out.contains("'teddy' tracked from the detection") && mm < 10.0, "{out}");
+    assert!(send().is_fresh(), "tracked from then on");
+    // A detection of an object being tracked changes nothing unless it says always.
+    let (ok, out) = run_while_sending(&args, &mut || {
+        send();
+    });
+    assert!(ok && out.contains("the detection was not needed"), "{out}");
+    signal(&tracker.0, "TERM");
+    let (code, out) = finish(tracker, 30);
+    assert_eq!(code, Some(0), "{out}");
+    let counts = "detections: 1 applied, 1 not needed (object tracked), 1 too old, 1 of unknown objects, 1 invalid";
+    assert!(out.contains(counts), "{out}");
 }
 
 #[test]

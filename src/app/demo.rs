@@ -73,6 +73,7 @@ pub fn run(job: &DemoJob) -> Result<()> {
             .arg("--config")
             .arg(&job.config)
             .args(["--camera-service", &camera_service, "--poses-service", &poses_service])
+            .args(["--detections-service", &format!("{tag}/detections")])
             .args(["--max-frames", &frames.to_string(), "--idle-timeout", "10"])
             .stdout(Stdio::piped())
             .spawn()

@@ -9,6 +9,8 @@ pub mod capacity;
 pub mod convert;
 pub mod dataset;
 pub mod demo;
+pub mod detect_client;
+pub mod detections;
 pub mod interrupt;
 pub mod mapper;
 pub mod model_cmd;

@@ -8,6 +8,7 @@
 //! listener's timed wait none. The wait times out every 250 ms to notice signals and an
 //! idle camera.
 
+use super::detections::{DetectionCounts, DetectionInbox};
 use super::recorder::{RecordOptions, RecordStats, Recorder};
 use super::report::{RECENT_SAMPLES, log_line, percentile, push_recent};
 use super::tracking::{StepOutput, Workers, invalid_frame, load_tracker, pose_message, track_frame};
@@ -59,6 +60,8 @@ pub struct RunSummary {
     pub latency_ms: Vec<f64>,
     /// Why the recording (`--record`) failed, if it did; the run itself went on.
     pub recording_error: Option<anyhow::Error>,
+    /// What became of the detections received.
+    pub detections: DetectionCounts,
 }
 
 /// What the observer sees after each frame (tests use it to arm counters).
@@ -120,6 +123,7 @@ struct Core<F: WireFrame> {
     subscriber: Subscriber<Ipc, F, ()>,
     poses: ipc::PosePorts,
     notifier: Notifier<Ipc>,
+    detections: DetectionInbox,
     track_ms: Vec<f64>,
     latency_ms: Vec<f64>,
     last_sequence: Option<u64>,
@@ -159,6 +163,7 @@ impl<F: WireFrame> LiveTracker<F> {
         let listener = frame_events.listener_builder().create().map_err(|e| err("listener", &frames_name, &e))?;
         let notifier =
             pose_events.notifier_builder().create().map_err(|e| err("pose notifier", &config.poses_service, &e))?;
+        let detections = DetectionInbox::open(&node, &config.detections_service, config.detection_max_age_ns)?;
         let core = Core {
             out,
             tracker,
@@ -167,13 +172,14 @@ impl<F: WireFrame> LiveTracker<F> {
             subscriber,
             poses,
             notifier,
+            detections,
             track_ms: Vec::with_capacity(RECENT_SAMPLES),
             latency_ms: Vec::with_capacity(RECENT_SAMPLES),
             last_sequence: None,
             timed_frames: 0,
             recorder: None,
         };
-        let poses_name = config.poses_service.clone();
+        let poses_name = format!("{} (detections from {})", config.poses_service, config.detections_service);
         let other_size_name = config.frame_size.other().service(&config.camera_service);
         Ok(LiveTracker { node, listener, core, frames_name, other_size_name, poses_name, placement })
     }
@@ -205,6 +211,7 @@ impl<F: WireFrame> LiveTracker<F> {
             track_ms: Vec::new(),
             latency_ms: Vec::new(),
             recording_error: None,
+            detections: DetectionCounts::default(),
         };
         let mut last_frame = Instant::now();
         let mut waiting_reported = false;
@@ -243,6 +250,7 @@ impl<F: WireFrame> LiveTracker<F> {
         }
         summary.track_ms = self.core.track_ms.clone();
         summary.latency_ms = self.core.latency_ms.clone();
+        summary.detections = self.core.detections.counts;
         Ok(summary)
     }
 
@@ -286,6 +294,8 @@ impl<F: WireFrame> Core<F> {
             summary.skipped_frames += header.sequence - last - 1;
         }
         self.last_sequence = Some(header.sequence);
+        // Detections that came since the last frame re-initialise their objects first.
+        self.detections.take(&mut self.tracker, header.capture_stamp_ns)?;
         let invalid = match message.frame() {
             Ok(frame) => {
                 track_frame(&mut self.tracker, &self.pool, &frame, &mut self.out, Workers::Sleep);
@@ -392,6 +402,13 @@ pub fn print_summary(config: &TrackerConfig, s: &RunSummary) {
             percentile(&s.track_ms, 0.99),
             percentile(&s.latency_ms, 0.5),
             percentile(&s.latency_ms, 0.99)
+        );
+    }
+    let d = &s.detections;
+    if d.any() {
+        println!(
+            "  detections: {} applied, {} not needed (object tracked), {} too old, {} of unknown objects, {} invalid",
+            d.applied, d.not_needed, d.stale, d.unknown_object, d.invalid
         );
     }
 }

@@ -152,9 +152,6 @@ pub fn pose_message(name: &str, out: &StepOutput, k: usize, frame: (u64, u64), t
     for (i, c) in covariance.iter_mut().enumerate() {
         *c = e.covariance_ros[(i / 6, i % 6)];
     }
-    let mut name_bytes = [0u8; 32];
-    let n = name.len().min(31);
-    name_bytes[..n].copy_from_slice(&name.as_bytes()[..n]);
     ObjectPose {
         layout_version: wire::LAYOUT_VERSION,
         object_id: k as u32,
@@ -174,6 +171,6 @@ pub fn pose_message(name: &str, out: &StepOutput, k: usize, frame: (u64, u64), t
         register_ms: out.register_ms[k],
         total_ms,
         free_space: e.free_space as f32,
-        name: name_bytes,
+        name: wire::name_bytes(name),
     }
 }

@@ -122,6 +122,10 @@ pub struct TrackArgs {
     /// Override the config's poses.service.
     #[arg(long, value_parser = service_name)]
     pub poses_service: Option<String>,
+    /// Override the config's detections.service (where `mrsmap detect` and external
+    /// detectors send detections).
+    #[arg(long, value_parser = service_name)]
+    pub detections_service: Option<String>,
     /// Stop after this many seconds without a frame (live mode).
     #[arg(long)]
     pub idle_timeout: Option<f64>,
@@ -168,33 +172,6 @@ pub struct TrackArgs {
     /// Offline: write object_from_camera per object (TUM format).
     #[arg(long, requires = "dataset")]
     pub trajectory: Option<PathBuf>,
-}
-
-#[derive(Args)]
-pub struct PosesArgs {
-    /// The pose service (the tracker config's poses.service).
-    #[arg(long, default_value = mrsmap::io::ipc::POSES_SERVICE, value_parser = service_name)]
-    pub service: String,
-    /// Write each object's object_from_camera as a TUM trajectory (frames whose pose was
-    /// estimated from them; a comment line for the others: lost, initialising, invalid,
-    /// or held, the last good pose kept through a failed registration). Written as the poses arrive, into OUT.partial,
-    /// which takes the name OUT when the client stops: a client that is killed leaves
-    /// OUT.partial with every pose it received.
-    #[arg(long)]
-    pub out: Option<PathBuf>,
-    /// Replace the OUT.partial trajectories that a client stopped before its end left
-    /// (without it they are an error: they hold that run's poses).
-    #[arg(long, requires = "out")]
-    pub force: bool,
-    /// Stop after this many pose messages.
-    #[arg(long, value_parser = at_least_one::<u64>)]
-    pub count: Option<u64>,
-    /// Stop after this many seconds without a pose.
-    #[arg(long)]
-    pub timeout: Option<f64>,
-    /// Print only the summary, not every pose.
-    #[arg(long)]
-    pub quiet: bool,
 }
 
 #[derive(Subcommand)]
@@ -524,7 +501,7 @@ pub struct SynthArgs {
 
 /// A count such as `--max-frames`: zero would run nothing and report nothing, so it is
 /// refused at once.
-fn at_least_one<T>(text: &str) -> Result<T, String>
+pub(super) fn at_least_one<T>(text: &str) -> Result<T, String>
 where
     T: std::str::FromStr<Err = std::num::ParseIntError> + From<u8> + PartialEq,
 {
@@ -561,6 +538,6 @@ fn chunk_size(text: &str) -> Result<u64, String> {
 
 /// An iceoryx2 service name (prefix): not empty, or the driver and the tracker would
 /// meet on a bare `/rgbd/vga`.
-fn service_name(text: &str) -> Result<String, String> {
+pub(super) fn service_name(text: &str) -> Result<String, String> {
     if text.trim().is_empty() { Err("a service name must not be empty".into()) } else { Ok(text.to_owned()) }
 }

@@ -1,6 +1,7 @@
 //! What each subcommand does: build the job from the arguments, run it, print.
 
 use super::args::*;
+use super::args_live::*;
 use anyhow::{Context, Result};
 use mrsmap::app;
 use mrsmap::app::interrupt::{INTERRUPTED_EXIT, Interrupted, Stop};
@@ -50,6 +51,12 @@ pub fn track(a: TrackArgs) -> Result<ExitCode> {
     }
     if let Some(s) = a.poses_service {
         config.poses_service = s;
+    }
+    if let Some(s) = a.detections_service {
+        config.detections_service = s;
+    }
+    if config.detections_service == config.poses_service {
+        anyhow::bail!("the detection and pose services are both {}: they must differ", config.poses_service);
     }
     if let Some(dataset) = a.dataset {
         let camera = a.camera.ok_or_else(|| anyhow::anyhow!("--dataset needs --camera (the dataset's camera file)"))?;
@@ -211,6 +218,29 @@ pub fn poses(a: PosesArgs) -> Result<()> {
     let s = app::poses_client::run(&job)?;
     app::poses_client::print_summary(&s);
     Ok(())
+}
+
+/// `mrsmap detect`.
+pub fn detect(a: DetectArgs) -> Result<()> {
+    let [tx, ty, tz, qx, qy, qz, qw] = a.pose[..] else { anyhow::bail!("--pose takes 7 numbers") };
+    let q = nalgebra::Quaternion::new(qw, qx, qy, qz);
+    if !a.pose.iter().all(|v| v.is_finite()) || (q.norm() - 1.0).abs() > 1e-3 {
+        anyhow::bail!("--pose must be finite, with a unit quaternion (its norm is {:.4})", q.norm());
+    }
+    let job = app::detect_client::DetectJob {
+        service: a.service,
+        poses_service: a.poses,
+        object: a.object,
+        camera_from_object: mrsmap::geometry::Pose::from_parts(
+            nalgebra::Translation3::new(tx, ty, tz),
+            nalgebra::UnitQuaternion::from_quaternion(q),
+        ),
+        frame_stamp_ns: a.frame_stamp_ns.unwrap_or(0),
+        always: a.always,
+        timeout: seconds(Some(a.timeout), "--timeout")?.unwrap_or_default(),
+    };
+    let outcome = app::detect_client::run(&job)?;
+    app::detect_client::report(&job, &outcome)
 }
 
 /// `mrsmap eval …`.

@@ -7,6 +7,7 @@
 //! | same name, event | — | the driver notifies after each send; subscribers wait on it (no polling) |
 //! | `mrsmap/poses` | blackboard, key `u32` object id → [`ObjectPose`] | created by the tracker (its only writer; a restarted tracker reopens the one its clients kept), ≤ 16 readers; each entry holds the object's newest pose |
 //! | `mrsmap/poses`, event | — | the tracker notifies after each frame's poses |
+//! | `mrsmap/detections` | [`ObjectDetection`] | safe overflow, subscriber buffer [`DETECTION_BUFFER`] (the oldest is dropped when more arrive between two frames), history 0, ≤ 8 publishers (detectors), ≤ 4 subscribers (trackers); no event: the tracker takes them before each frame |
 //!
 //! Poses go on a blackboard rather than a publish–subscribe service: updating an entry
 //! writes shared memory in place, while iceoryx2 0.10's publisher allocates a small
@@ -14,7 +15,7 @@
 //! loop allocates nothing. A control stack wants the newest pose anyway; the frame
 //! sequence in each pose shows whether one was missed.
 
-use super::wire::{ObjectPose, WireFrame};
+use super::wire::{ObjectDetection, ObjectPose, WireFrame};
 use iceoryx2::node::Node;
 use iceoryx2::port::writer::EntryHandleMutError;
 use iceoryx2::prelude::*;
@@ -26,6 +27,12 @@ pub type Ipc = iceoryx2::service::ipc::Service;
 
 /// The default pose service.
 pub const POSES_SERVICE: &str = "mrsmap/poses";
+
+/// The default detection service.
+pub const DETECTIONS_SERVICE: &str = "mrsmap/detections";
+
+/// Detections the tracker's subscriber holds between two frames.
+pub const DETECTION_BUFFER: usize = 16;
 
 /// An iceoryx2 operation failed.
 #[derive(Debug, thiserror::Error)]
@@ -126,6 +133,24 @@ pub fn frame_service_exists(name: &str) -> bool {
     service_name(name).is_ok_and(|n| {
         Ipc::does_exist(&n, Config::global_config(), MessagingPattern::PublishSubscribe).unwrap_or(false)
     })
+}
+
+/// The detection service `name` (publish–subscribe with the QoS above): detectors
+/// publish, the tracker subscribes.
+pub fn detections(
+    node: &Node<Ipc>,
+    name: &str,
+) -> Result<publish_subscribe::PortFactory<Ipc, ObjectDetection, ()>, IpcError> {
+    node.service_builder(&service_name(name)?)
+        .publish_subscribe::<ObjectDetection>()
+        .enable_safe_overflow(true)
+        .subscriber_max_buffer_size(DETECTION_BUFFER)
+        .subscriber_max_borrowed_samples(2)
+        .history_size(0)
+        .max_publishers(8)
+        .max_subscribers(4)
+        .open_or_create()
+        .map_err(|e| IpcError::new(format!("opening detection service {name}"), e))
 }
 
 /// The event service `name` that accompanies a publish–subscribe service.

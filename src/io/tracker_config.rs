@@ -10,6 +10,10 @@
 //! [poses]                      # optional
 //! service = "mrsmap/poses"     # where poses are published
 //!
+//! [detections]                 # optional: an external detector's poses (`mrsmap detect`)
+//! service = "mrsmap/detections"
+//! max_age_s = 1.0              # older detections (by their frame's stamp) are ignored
+//!
 //! [tracker]                    # all optional
 //! threads = 2
 //! pin_threads = true          # one CPU per worker when as many as the process's CPUs
@@ -90,6 +94,11 @@ pub struct TrackerConfig {
     pub frame_size: FrameSize,
     /// The pose service.
     pub poses_service: String,
+    /// The detection service (an external detector re-initialises objects there).
+    pub detections_service: String,
+    /// Detections whose frame is older than this against the frame being tracked are
+    /// ignored (ns).
+    pub detection_max_age_ns: u64,
     /// Worker threads (all cores if absent).
     pub threads: Option<usize>,
     /// Restrict each worker thread of the live tracker to a CPU of its own when the
@@ -109,6 +118,8 @@ struct RawConfig {
     camera: RawCamera,
     #[serde(default)]
     poses: RawPoses,
+    #[serde(default)]
+    detections: RawDetections,
     #[serde(default)]
     tracker: RawTracker,
     #[serde(default)]
@@ -133,6 +144,29 @@ impl Default for RawPoses {
     fn default() -> Self {
         RawPoses { service: super::ipc::POSES_SERVICE.into() }
     }
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawDetections {
+    #[serde(default = "default_detections_service")]
+    service: String,
+    #[serde(default = "default_max_age_s")]
+    max_age_s: f64,
+}
+
+impl Default for RawDetections {
+    fn default() -> Self {
+        RawDetections { service: default_detections_service(), max_age_s: default_max_age_s() }
+    }
+}
+
+fn default_detections_service() -> String {
+    super::ipc::DETECTIONS_SERVICE.into()
+}
+
+fn default_max_age_s() -> f64 {
+    1.0
 }
 
 fn default_size() -> String {
@@ -240,10 +274,19 @@ pub fn parse_tracker_config(text: &str, origin: &Path) -> Result<TrackerConfig, 
     if raw.poses.service.is_empty() {
         return Err(invalid("poses.service is empty".into()));
     }
+    if raw.detections.service.is_empty() || raw.detections.service == raw.poses.service {
+        return Err(invalid("detections.service must be set and differ from poses.service".into()));
+    }
+    let max_age_s = raw.detections.max_age_s;
+    if !(max_age_s.is_finite() && max_age_s > 0.0 && max_age_s <= 3600.0) {
+        return Err(invalid(format!("detections.max_age_s = {max_age_s}: expected seconds in (0, 3600]")));
+    }
     Ok(TrackerConfig {
         camera_service: raw.camera.service,
         frame_size,
         poses_service: raw.poses.service,
+        detections_service: raw.detections.service,
+        detection_max_age_ns: (max_age_s * 1e9).round() as u64,
         threads: t.threads,
         pin_threads: t.pin_threads.unwrap_or(true),
         params,
@@ -294,6 +337,23 @@ mod tests {
         assert_eq!(c.frame_size, FrameSize::Vga);
         assert_eq!(c.params, TrackerParams::default());
         assert_eq!(c.objects[0].model, Path::new("robot_config/../models/teddy.mrsm"));
+    }
+
+    #[test]
+    fn detections_have_a_service_and_an_age_limit() {
+        let p = Path::new("t.toml");
+        let c = parse_tracker_config(GOOD, p).expect("valid");
+        assert_eq!((c.detections_service.as_str(), c.detection_max_age_ns), ("mrsmap/detections", 1_000_000_000));
+        let set = GOOD.replace("[camera]", "[detections]\nservice = \"d\"\nmax_age_s = 0.25\n[camera]");
+        let c = parse_tracker_config(&set, p).expect("valid");
+        assert_eq!((c.detections_service.as_str(), c.detection_max_age_ns), ("d", 250_000_000));
+        for bad in
+            ["max_age_s = 0", "max_age_s = -1", "max_age_s = nan", "service = \"\"", "service = \"mrsmap/poses\""]
+        {
+            let text = GOOD.replace("[camera]", &format!("[detections]\n{bad}\n[camera]"));
+            let e = parse_tracker_config(&text, p).unwrap_err().to_string();
+            assert!(e.contains("detections."), "{bad}: {e}");
+        }
     }
 
     #[test]

@@ -319,6 +319,127 @@ impl ObjectPose {
     }
 }
 
+/// An object name as the messages carry it: UTF-8, NUL-padded to 32 bytes (at most 31
+/// bytes are kept, so the last is always NUL).
+pub fn name_bytes(name: &str) -> [u8; 32] {
+    let mut bytes = [0u8; 32];
+    let n = name.len().min(31);
+    bytes[..n].copy_from_slice(&name.as_bytes()[..n]);
+    bytes
+}
+
+/// How a detection is applied ([`ObjectDetection::mode`]).
+pub mod detection_mode {
+    /// Only to an object that is not being tracked (lost or initialising): a detector
+    /// that runs all the time does not disturb tracking.
+    pub const WHEN_NOT_TRACKING: u32 = 0;
+    /// Also to an object being tracked: the tracker restarts from the detection (the
+    /// detector knows better, e.g. after the object was moved while occluded).
+    pub const ALWAYS: u32 = 1;
+}
+
+/// An object detected by an external detector (a pose estimator, a fiducial marker, an
+/// operator), sent to the tracker, which re-initialises the object there: the next
+/// frame is registered from this pose and tracking resumes if its quality reaches the
+/// re-initialisation threshold.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("MrsmapObjectDetection")]
+pub struct ObjectDetection {
+    /// [`LAYOUT_VERSION`].
+    pub layout_version: u32,
+    /// One of [`detection_mode`].
+    pub mode: u32,
+    /// Capture stamp of the frame the object was detected in (ns since the Unix epoch;
+    /// the `capture_stamp_ns` of its frame message). The tracker ignores detections
+    /// older than its `detections.max_age_s` against the frame it is about to track; 0:
+    /// no stamp, applied whatever its age.
+    pub frame_stamp_ns: u64,
+    /// When the detector sent it (ns since the Unix epoch; for diagnostics).
+    pub send_stamp_ns: u64,
+    /// `camera_from_object` translation (m), camera optical frame (REP 103).
+    pub translation_m: [f64; 3],
+    /// `camera_from_object` rotation as a unit quaternion `x, y, z, w` (norm within
+    /// 10⁻³ of 1; it is normalised).
+    pub rotation_xyzw: [f64; 4],
+    /// The object's name in the tracker's configuration, UTF-8, NUL-padded.
+    pub name: [u8; 32],
+}
+
+/// Why a detection cannot be used.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DetectionError {
+    /// Another layout version.
+    #[error("detection layout version {found}, expected {expected}")]
+    LayoutVersion {
+        /// In the message.
+        found: u32,
+        /// Supported.
+        expected: u32,
+    },
+    /// A mode that is not one of [`detection_mode`].
+    #[error("detection mode {0} (expected 0: when not tracking, or 1: always)")]
+    Mode(u32),
+    /// The name is empty, not NUL-terminated or not UTF-8.
+    #[error("the detection's object name is empty, unterminated or not UTF-8")]
+    Name,
+    /// A translation or rotation that is not finite, or a quaternion that is not unit.
+    #[error("the detection's pose is not finite or its quaternion is not unit (norm {norm:.4})")]
+    Pose {
+        /// The quaternion's norm.
+        norm: f64,
+    },
+}
+
+impl ObjectDetection {
+    /// A detection of object `name` at `camera_from_object`, seen in the frame stamped
+    /// `frame_stamp_ns` (0: no stamp).
+    pub fn new(name: &str, camera_from_object: &crate::geometry::Pose, frame_stamp_ns: u64, mode: u32) -> Self {
+        let t = camera_from_object.translation.vector;
+        let q = camera_from_object.rotation.quaternion();
+        ObjectDetection {
+            layout_version: LAYOUT_VERSION,
+            mode,
+            frame_stamp_ns,
+            send_stamp_ns: 0,
+            translation_m: [t.x, t.y, t.z],
+            rotation_xyzw: [q.i, q.j, q.k, q.w],
+            name: name_bytes(name),
+        }
+    }
+
+    /// The object's name.
+    pub fn object_name(&self) -> Result<&str, DetectionError> {
+        let end = self.name.iter().position(|&b| b == 0).ok_or(DetectionError::Name)?;
+        match std::str::from_utf8(&self.name[..end]) {
+            Ok(name) if !name.is_empty() => Ok(name),
+            _ => Err(DetectionError::Name),
+        }
+    }
+
+    /// Checks the message and returns `camera_from_object` (quaternion normalised).
+    pub fn camera_from_object(&self) -> Result<crate::geometry::Pose, DetectionError> {
+        if self.layout_version != LAYOUT_VERSION {
+            return Err(DetectionError::LayoutVersion { found: self.layout_version, expected: LAYOUT_VERSION });
+        }
+        if self.mode > detection_mode::ALWAYS {
+            return Err(DetectionError::Mode(self.mode));
+        }
+        let [x, y, z, w] = self.rotation_xyzw;
+        let q = nalgebra::Quaternion::new(w, x, y, z);
+        let norm = q.norm();
+        let finite = self.translation_m.iter().chain(&self.rotation_xyzw).all(|v| v.is_finite());
+        if !finite || (norm - 1.0).abs() > 1e-3 {
+            return Err(DetectionError::Pose { norm });
+        }
+        let [tx, ty, tz] = self.translation_m;
+        Ok(crate::geometry::Pose::from_parts(
+            nalgebra::Translation3::new(tx, ty, tz),
+            nalgebra::UnitQuaternion::from_quaternion(q),
+        ))
+    }
+}
+
 /// A loaned, uninitialised iceoryx2 sample.
 pub type LoanedSample<S, P> = iceoryx2::sample_mut_uninit::SampleMutUninit<S, MaybeUninit<P>, ()>;
 /// A written iceoryx2 sample, ready to send.
@@ -372,6 +493,55 @@ mod tests {
         assert_eq!(offset_of!(ObjectPose, build_ms), 408);
         assert_eq!(offset_of!(ObjectPose, name), 424);
         assert_eq!(size_of::<ObjectPose>(), 456);
+    }
+
+    #[test]
+    fn detection_layout_is_fixed() {
+        assert_eq!(offset_of!(ObjectDetection, mode), 4);
+        assert_eq!(offset_of!(ObjectDetection, frame_stamp_ns), 8);
+        assert_eq!(offset_of!(ObjectDetection, send_stamp_ns), 16);
+        assert_eq!(offset_of!(ObjectDetection, translation_m), 24);
+        assert_eq!(offset_of!(ObjectDetection, rotation_xyzw), 48);
+        assert_eq!(offset_of!(ObjectDetection, name), 80);
+        assert_eq!(size_of::<ObjectDetection>(), 112);
+        assert_eq!(align_of::<ObjectDetection>(), 8);
+    }
+
+    #[test]
+    fn a_detection_round_trips_and_bad_ones_are_named() {
+        use crate::geometry::Pose;
+        use nalgebra::{Translation3, UnitQuaternion};
+        let pose =
+            Pose::from_parts(Translation3::new(0.1, -0.2, 0.9), UnitQuaternion::from_euler_angles(0.3, -0.2, 1.0));
+        let d = ObjectDetection::new("teddy", &pose, 42, detection_mode::ALWAYS);
+        assert_eq!(d.object_name(), Ok("teddy"));
+        let back = d.camera_from_object().expect("valid");
+        assert!((back.translation.vector - pose.translation.vector).norm() < 1e-12);
+        assert!(back.rotation.angle_to(&pose.rotation) < 1e-9);
+        let bad = |f: fn(&mut ObjectDetection)| {
+            let mut m = d;
+            f(&mut m);
+            m
+        };
+        assert!(matches!(
+            bad(|m| m.layout_version = 1).camera_from_object(),
+            Err(DetectionError::LayoutVersion { .. })
+        ));
+        assert_eq!(bad(|m| m.mode = 7).camera_from_object(), Err(DetectionError::Mode(7)));
+        assert!(matches!(
+            bad(|m| m.translation_m[1] = f64::NAN).camera_from_object(),
+            Err(DetectionError::Pose { .. })
+        ));
+        assert!(matches!(bad(|m| m.rotation_xyzw = [0.0; 4]).camera_from_object(), Err(DetectionError::Pose { .. })));
+        assert!(matches!(
+            bad(|m| m.rotation_xyzw[3] = f64::INFINITY).camera_from_object(),
+            Err(DetectionError::Pose { .. })
+        ));
+        assert_eq!(bad(|m| m.name = [0; 32]).object_name(), Err(DetectionError::Name));
+        assert_eq!(bad(|m| m.name = [b'a'; 32]).object_name(), Err(DetectionError::Name));
+        assert_eq!(bad(|m| m.name[0] = 0xff).object_name(), Err(DetectionError::Name));
+        // A long name keeps 31 bytes and its terminating NUL.
+        assert_eq!(ObjectDetection::new(&"x".repeat(40), &pose, 0, 0).object_name().map(str::len), Ok(31));
     }
 
     #[test]

@@ -139,6 +139,11 @@ impl Tracker {
         &self.objects[k].model
     }
 
+    /// Whether object `k` is being tracked (not lost, not initialising).
+    pub fn is_tracking(&self, k: usize) -> bool {
+        self.objects[k].tracking
+    }
+
     /// The parameters.
     pub fn params(&self) -> &TrackerParams {
         &self.params

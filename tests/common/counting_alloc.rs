@@ -7,6 +7,9 @@
 //! more than 60 s, which a loaded machine can make the live-loop tests do. The first
 //! counted allocation's thread and backtrace are kept for the failure message
 //! ([`first_allocation`]).
+//!
+//! A thread named `test-detector` is never counted: it plays an external detector that
+//! sends detections to the tracker under test, a process of its own in real use.
 #![allow(unsafe_code)]
 
 use std::alloc::{GlobalAlloc, Layout, System};
@@ -18,6 +21,9 @@ const RECORDER_THREAD: &str = "mrsmap-recorder";
 
 /// The name of the test harness's thread (the process's main thread).
 const HARNESS_THREAD: &str = "main";
+
+/// The name of a test's stand-in for an external detector process (never counted).
+pub const DETECTOR_THREAD: &str = "test-detector";
 
 /// Counts allocations and reallocations while [`ARMED`].
 pub struct Counting;
@@ -47,6 +53,8 @@ enum Kind {
     Recorder,
     /// The test harness's thread.
     Harness,
+    /// A stand-in for another process ([`DETECTOR_THREAD`]).
+    Detector,
     /// Any other thread: the code under test.
     Other,
 }
@@ -67,6 +75,7 @@ fn thread_kind() -> Kind {
                 let found = match std::thread::current().name() {
                     Some(RECORDER_THREAD) => Kind::Recorder,
                     Some(HARNESS_THREAD) => Kind::Harness,
+                    Some(DETECTOR_THREAD) => Kind::Detector,
                     _ => Kind::Other,
                 };
                 kind.set(found);
@@ -87,6 +96,7 @@ fn count() {
     }
     match thread_kind() {
         Kind::Harness if HARNESS_APART.load(Ordering::Relaxed) => {}
+        Kind::Detector => {}
         Kind::Recorder if RECORDER_APART.load(Ordering::Relaxed) => {
             RECORDER_ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
         }

@@ -150,7 +150,8 @@ pub fn mrsmap_bin() -> PathBuf {
 pub fn tracker_config_text(tag: &str, tracker: &str) -> String {
     let id = format!("mrsmap_test_{}_{tag}", std::process::id());
     format!(
-        "[camera]\nservice = \"{id}/camera\"\n[poses]\nservice = \"{id}/poses\"\n[tracker]\nthreads = 2\n{tracker}\n\
+        "[camera]\nservice = \"{id}/camera\"\n[poses]\nservice = \"{id}/poses\"\n\
+         [detections]\nservice = \"{id}/detections\"\n[tracker]\nthreads = 2\n{tracker}\n\
          [[object]]\nname = \"teddy\"\nmodel = \"{}\"\n\
          camera_from_object = [0.1923, 0.1253, 1.0402, -0.25098, -0.79599, 0.53327, -0.13797]\n\
          search_translation_m = 0.05\nsearch_yaw_deg = 20.0\n",
