@@ -157,9 +157,15 @@ impl TestDriver {
         TestDriver { _node: node, publisher, notifier, rgb: f.rgb.to_vec(), depth: f.depth.to_vec(), header }
     }
 
+    /// The capture stamp of frame `sequence`: the clip's first, 33 ms later per frame.
+    fn stamp_of(&self, sequence: u64) -> u64 {
+        self.header.capture_stamp_ns + sequence * 33_333_333
+    }
+
     /// Sends the clip's first frame with `sequence`, after `damage` changed it.
     fn send(&self, sequence: u64, damage: impl FnOnce(&mut RgbdFrameVga)) {
-        let header = FrameHeader { sequence, send_stamp_ns: ipc::now_ns(), ..self.header };
+        let capture_stamp_ns = self.stamp_of(sequence);
+        let header = FrameHeader { sequence, capture_stamp_ns, send_stamp_ns: ipc::now_ns(), ..self.header };
         let loan = self.publisher.loan_uninit().expect("loan");
         let mut sample = write_frame(loan, &header, &self.rgb, &self.depth).expect("fits");
         damage(sample.payload_mut());
@@ -286,7 +292,8 @@ fn run_while_sending(args: &[&str], send: &mut dyn FnMut()) -> (bool, String) {
 fn a_detection_finds_an_object_the_tracker_could_not() {
     // The configured pose is 0.4 m off and there is no search region: on its own the
     // tracker never finds the teddy. `mrsmap detect` with its true pose (in the clip's
-    // first frame, which the driver below sends over and over) makes it track.
+    // first frame, which the driver below sends over and over) makes it track. The run
+    // is recorded, and its replay applies the detection again before the same frame.
     let dir = temp_dir("detections");
     let text = tracker_config_text("detect", "")
         .replace("camera_from_object = [0.1923,", "camera_from_object = [0.5923,")
@@ -294,20 +301,23 @@ fn a_detection_finds_an_object_the_tracker_could_not() {
     let config_path = dir.join("tracker.toml");
     std::fs::write(&config_path, text).expect("write config");
     let config = read_tracker_config(&config_path).expect("config");
-    let (tracker, tracker_err) = start(&["track", "--config", path(&config_path)]);
+    let recorded = dir.join("recorded.mcap");
+    let (tracker, tracker_err) = start(&["track", "--config", path(&config_path), "--record", path(&recorded)]);
     wait_for(&tracker_err, "ready", 60);
     let driver = TestDriver::new(&config.camera_service);
     let node = ipc::node("test_detector").expect("node");
     let poses = ipc::open_poses(&node, &config.poses_service).expect("the tracker created the blackboard");
     let reader = poses.reader_builder().create().expect("reader");
     let entry = reader.entry::<ObjectPose>(&0).expect("object 0");
-    let mut sequence = 0;
+    let (mut sequence, mut fresh) = (0, 0);
     let mut send = || {
         sequence += 1;
         driver.send(sequence, |_| {});
-        read_pose(&entry, sequence)
+        let pose = read_pose(&entry, sequence);
+        fresh += usize::from(pose.is_fresh());
+        (pose, driver.stamp_of(sequence))
     };
-    assert_eq!(send().status, status::INITIALISING, "not found at the configured pose");
+    assert_eq!(send().0.status, status::INITIALISING, "not found at the configured pose");
     // Detections the tracker must not apply: too old, of an unknown object, broken.
     let publisher = ipc::detections(&node, &config.detections_service).expect("service").publisher_builder().create();
     let publisher = publisher.expect("publisher");
@@ -315,7 +325,8 @@ fn a_detection_finds_an_object_the_tracker_could_not() {
         nalgebra::Translation3::new(0.1923, 0.1253, 1.0402),
         nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(-0.13797, -0.25098, -0.79599, 0.53327)),
     );
-    let frame_stamp_ns = driver.header.capture_stamp_ns;
+    let (pose, frame_stamp_ns) = send();
+    assert_eq!(pose.status, status::INITIALISING);
     let always = detection_mode::ALWAYS;
     let stale = ObjectDetection::new("teddy", &truth, frame_stamp_ns - 2_000_000_000, always);
     let stranger = ObjectDetection::new("bear", &truth, frame_stamp_ns, always);
@@ -323,18 +334,17 @@ fn a_detection_finds_an_object_the_tracker_could_not() {
     for d in [stale, stranger, broken] {
         publisher.send_copy(d).expect("sent");
     }
-    assert_eq!(send().status, status::INITIALISING, "none of them applied");
+    assert_eq!(send().0.status, status::INITIALISING, "none of them applied");
     let seen = wait_for(&tracker_err, "a detection refused", 10).join("\n");
-    assert!(seen.contains("its frame is 2.000 s older") && seen.contains("'bear' ignored"), "{seen}");
-    // The detector client, as a robot's detector would send it (a process of its own).
+    assert!(seen.contains("its frame is 2.033 s older") && seen.contains("'bear' ignored"), "{seen}");
+    // The detector client, as a robot's detector would send it (a process of its own),
+    // for the frame sent last.
     let q = truth.rotation.quaternion();
     let t = truth.translation.vector;
     let pose: Vec<String> = [t.x, t.y, t.z, q.i, q.j, q.k, q.w].iter().map(|v| v.to_string()).collect();
+    let stamp = send().1.to_string();
     let mut args = vec!["detect", "--object", "teddy", "--service", &config.detections_service];
-    args.extend(["--poses", &config.poses_service, "--frame-stamp-ns"]);
-    let stamp = frame_stamp_ns.to_string();
-    args.push(&stamp);
-    args.push("--pose");
+    args.extend(["--poses", &config.poses_service, "--frame-stamp-ns", &stamp, "--pose"]);
     args.extend(pose.iter().map(String::as_str));
     let (ok, out) = run_while_sending(&args, &mut || {
         send();
@@ -344,7 +354,7 @@ fn a_detection_finds_an_object_the_tracker_could_not() {
         out.split(" mm and").next().and_then(|s| s.rsplit(' ').next()).and_then(|v| v.parse().ok()).expect(&out);
     println!("{out}");
     assert!(out.contains("'teddy' tracked from the detection") && mm < 10.0, "{out}");
-    assert!(send().is_fresh(), "tracked from then on");
+    assert!(send().0.is_fresh(), "tracked from then on");
     // A detection of an object being tracked changes nothing unless it says always.
     let (ok, out) = run_while_sending(&args, &mut || {
         send();
@@ -355,6 +365,18 @@ fn a_detection_finds_an_object_the_tracker_could_not() {
     assert_eq!(code, Some(0), "{out}");
     let counts = "detections: 1 applied, 1 not needed (object tracked), 1 too old, 1 of unknown objects, 1 invalid";
     assert!(out.contains(counts), "{out}");
+    // The replay of the recording: the detection applied before the same frame, so the
+    // same frames tracked as live.
+    let replayed = Command::new(mrsmap_bin())
+        .args(["replay", "--input", path(&recorded), "--config", path(&config_path)])
+        .output()
+        .expect("replay runs");
+    let stdout = String::from_utf8_lossy(&replayed.stdout);
+    assert!(replayed.status.success(), "{stdout}{}", String::from_utf8_lossy(&replayed.stderr));
+    let frames = format!("{sequence} frames paired");
+    let tracking = format!("teddy: {fresh} frames tracking (0 held)");
+    assert!(stdout.contains(&frames) && stdout.contains(&tracking), "{frames}, {tracking} in {stdout}");
+    assert!(stdout.contains("detections recorded with the live run: 1 of 1 applied again"), "{stdout}");
 }
 
 #[test]

@@ -80,25 +80,39 @@ pub fn judge(
 pub struct DetectionInbox {
     subscriber: Subscriber<Ipc, ObjectDetection, ()>,
     max_age_ns: u64,
+    /// The objects re-initialised before the current frame, and where (one per object).
+    applied: Vec<(usize, Pose)>,
     /// What became of the detections so far.
     pub counts: DetectionCounts,
 }
 
 impl DetectionInbox {
-    /// Subscribes to the detection service `name`.
-    pub fn open(node: &Node<Ipc>, name: &str, max_age_ns: u64) -> Result<Self, IpcError> {
+    /// Subscribes to the detection service `name`, for a tracker of `objects` objects.
+    pub fn open(node: &Node<Ipc>, name: &str, max_age_ns: u64, objects: usize) -> Result<Self, IpcError> {
         let service = ipc::detections(node, name)?;
         let subscriber = service
             .subscriber_builder()
             .create()
             .map_err(|e| IpcError::new(format!("detection subscriber on {name}"), e))?;
-        Ok(DetectionInbox { subscriber, max_age_ns, counts: DetectionCounts::default() })
+        Ok(DetectionInbox {
+            subscriber,
+            max_age_ns,
+            applied: Vec::with_capacity(objects),
+            counts: DetectionCounts::default(),
+        })
+    }
+
+    /// The objects re-initialised at a detection before the current frame (by the last
+    /// [`DetectionInbox::take`]), and the detected `camera_from_object` of each.
+    pub fn applied(&self) -> &[(usize, Pose)] {
+        &self.applied
     }
 
     /// Takes every detection that arrived since the last frame and re-initialises the
     /// objects they apply to, before the frame stamped `frame_stamp_ns` is tracked. The
     /// first detection of each outcome is logged; the rest are counted.
     pub fn take(&mut self, tracker: &mut Tracker, frame_stamp_ns: u64) -> Result<(), IpcError> {
+        self.applied.clear();
         while let Some(sample) = self.subscriber.receive().map_err(|e| IpcError::new("receiving a detection", e))? {
             let d = *sample.payload();
             drop(sample);
@@ -106,6 +120,11 @@ impl DetectionInbox {
             self.count(&d, &verdict, frame_stamp_ns, tracker.names());
             if let Verdict::Apply(k, camera_from_object) = verdict {
                 tracker.reinitialise(k, &camera_from_object);
+                // The last detection of an object before a frame is the one it starts from.
+                match self.applied.iter_mut().find(|(j, _)| *j == k) {
+                    Some(entry) => entry.1 = camera_from_object,
+                    None => self.applied.push((k, camera_from_object)),
+                }
             }
         }
         Ok(())
@@ -164,8 +183,10 @@ mod tests {
         let d = ObjectDetection::new("cow", &pose, 1_000, detection_mode::WHEN_NOT_TRACKING);
         // The pose as sent (its quaternion renormalised: equal to rounding).
         let applied_at_pose = |v: Verdict| match v {
-            Verdict::Apply(1, p) => (p.translation.vector - pose.translation.vector).norm() < 1e-12
-                && p.rotation.angle_to(&pose.rotation) < 1e-9,
+            Verdict::Apply(1, p) => {
+                (p.translation.vector - pose.translation.vector).norm() < 1e-12
+                    && p.rotation.angle_to(&pose.rotation) < 1e-9
+            }
             _ => false,
         };
         let tracking_teddy = |k: usize| k == 0;

@@ -24,6 +24,7 @@ pub mod read_ahead;
 pub mod recorder;
 pub mod render;
 pub mod replay;
+pub mod replay_detections;
 pub mod report;
 pub mod synth;
 pub mod track_dataset;

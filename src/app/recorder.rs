@@ -1,6 +1,7 @@
 //! Recording what the tracker receives and publishes into MCAP: the frames (ROS 2
 //! `Image` + `CameraInfo` on the default camera topics, so `mrsmap replay` reads the file
-//! as it is) and the poses (the replay's topics). The whole run, or a ring of the last N
+//! as it is), the poses (the replay's topics) and the detections applied before each
+//! frame (which the replay applies again). The whole run, or a ring of the last N
 //! seconds written at the end.
 //!
 //! The tracker's loop only copies the frame into one of a few slots allocated at start-up
@@ -61,6 +62,8 @@ struct PoseSnapshot {
 struct Slot {
     frame: OwnedFrame,
     poses: Vec<PoseSnapshot>,
+    /// Objects re-initialised at a detection before this frame, and where.
+    detections: Vec<(usize, Pose)>,
     /// When the tracker handed it over (the ring's clock).
     received: Instant,
 }
@@ -70,6 +73,7 @@ impl Slot {
         Box::new(Slot {
             frame: OwnedFrame::with_capacity(pixels),
             poses: Vec::with_capacity(objects),
+            detections: Vec::with_capacity(objects),
             received: Instant::now(),
         })
     }
@@ -170,9 +174,10 @@ impl Recorder {
         Ok(Recorder { free, full: Some(full), writer: Some(writer), dropped: 0, stopped: false })
     }
 
-    /// Hands a frame and the poses tracked in it to the writer; allocates nothing (the
-    /// frame must not exceed the slots' `max_pixels`).
-    pub fn record(&mut self, frame: &RgbdFrame<'_>, out: &StepOutput) {
+    /// Hands a frame, the detections applied before it (object, detected
+    /// `camera_from_object`; at most one per object) and the poses tracked in it to the
+    /// writer; allocates nothing (the frame must not exceed the slots' `max_pixels`).
+    pub fn record(&mut self, frame: &RgbdFrame<'_>, detections: &[(usize, Pose)], out: &StepOutput) {
         if self.stopped {
             return;
         }
@@ -182,6 +187,8 @@ impl Recorder {
         };
         slot.frame.copy_from(frame);
         slot.received = Instant::now();
+        slot.detections.clear();
+        slot.detections.extend(detections.iter().take(slot.detections.capacity()));
         slot.poses.clear();
         for (object, e) in out.estimates.iter().enumerate().take(slot.poses.capacity()) {
             if e.is_fresh() {
@@ -283,6 +290,7 @@ impl Ring {
         let Some(mut copy) = self.spare.pop().or_else(|| self.frames.pop_front()) else { return };
         copy.frame.clone_from(&slot.frame);
         copy.poses.clone_from(&slot.poses);
+        copy.detections.clone_from(&slot.detections);
         copy.received = slot.received;
         self.frames.push_back(copy);
     }
@@ -300,6 +308,9 @@ struct Output {
 impl Output {
     fn write(&mut self, slot: &Slot) -> Result<()> {
         let Some(frame) = slot.frame.view() else { return Ok(()) };
+        for (object, camera_from_object) in &slot.detections {
+            self.poses.write_detection(&mut self.file, *object, frame.stamp_ns, camera_from_object)?;
+        }
         self.frames.write_frame(&mut self.file, &frame, frame.stamp_ns, &mut self.scratch)?;
         let records: Vec<ObjectPoseRecord<'_>> = slot
             .poses

@@ -1,11 +1,14 @@
 //! `mrsmap replay`: the tracker's per-frame step (the one the live process runs) on every
 //! frame of an MCAP recording; poses out as MCAP (ROS 2 and Foxglove) and TUM trajectories.
+//! The detections a live run applied (recorded with it) are applied again before the
+//! same frames.
 
 use super::accuracy::{ObjectAccuracy, Published};
 use super::dataset::thread_pool;
 use super::interrupt::{Interrupted, Stop};
 use super::poses_client::{object_trajectory_header, object_trajectory_path};
 use super::read_ahead::read_frame;
+use super::replay_detections::RecordedDetections;
 use super::report::{both_written, percentile, progress_bar, write_or_rescue};
 use super::tracking::{LoadedModels, StepOutput, Workers, load_models, track_frame, tracker_for};
 use crate::frame::{OwnedFrame, RayTable};
@@ -79,6 +82,9 @@ pub struct ReplaySummary {
     pub accuracy: Vec<ObjectAccuracy>,
     /// The model of the published covariances.
     pub covariance: crate::tracking::CovarianceModel,
+    /// Detections recorded with the live run: applied again, in the recording, and
+    /// unreadable.
+    pub detections: (usize, usize, usize),
 }
 
 /// Replays the recording through the tracker.
@@ -108,6 +114,8 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
     let started = Instant::now();
     let mut reader = RecordingReader::open(&job.input, job.topics.clone(), job.camera)?;
     let depth_count = reader.depth_count();
+    let names: Vec<String> = config.objects.iter().map(|o| o.name.clone()).collect();
+    let detections = RecordedDetections::read(&job.input, &names)?;
     let pool = thread_pool(config.threads)?;
     // The first frame (which sizes the tracker) is read, and its camera's rays computed,
     // while the models load.
@@ -125,19 +133,10 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
         )
     });
     let LoadedModels { objects: models, world_from_model } = models?;
-    let names: Vec<String> = config.objects.iter().map(|o| o.name.clone()).collect();
     // Written next to the target and renamed when finished, also after an error, so
     // the poses computed before it are kept.
     let partial = out.as_deref().map(crate::io::atomic::partial_path);
-    let mut output = match &partial {
-        Some(p) => {
-            let mut file = McapFile::create(p, mcap::Compression::Zstd, DEFAULT_CHUNK_BYTES)
-                .with_context(|| format!("creating {}", p.display()))?;
-            let channels = PoseChannels::add(&mut file, &names)?;
-            Some((file, channels))
-        }
-        None => None,
-    };
+    let mut output = partial.as_deref().map(|p| create_output(p, &names)).transpose()?;
     let mut state = Replay {
         models,
         rays,
@@ -150,6 +149,8 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
         frames: 0,
         first_tracked: None,
         interrupted: None,
+        detections,
+        detections_applied: 0,
     };
     let bar = progress_bar(depth_count.unwrap_or(0), "replaying");
     let result = state.replay(config, job, (&mut reader, first), &pool, &names, output.as_mut(), &bar);
@@ -192,7 +193,16 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
         interrupted: state.interrupted,
         accuracy,
         covariance: config.params.covariance,
+        detections: (state.detections_applied, state.detections.len(), state.detections.unreadable),
     })
+}
+
+/// The MCAP file of the poses, created at `partial` (renamed when finished).
+fn create_output(partial: &std::path::Path, names: &[String]) -> Result<(McapFile, PoseChannels)> {
+    let mut file = McapFile::create(partial, mcap::Compression::Zstd, DEFAULT_CHUNK_BYTES)
+        .with_context(|| format!("creating {}", partial.display()))?;
+    let channels = PoseChannels::add(&mut file, names)?;
+    Ok((file, channels))
 }
 
 struct Replay {
@@ -212,6 +222,9 @@ struct Replay {
     /// When the first frame had been tracked.
     first_tracked: Option<Instant>,
     interrupted: Option<Interrupted>,
+    /// The recording's detections, applied before their frames.
+    detections: RecordedDetections,
+    detections_applied: usize,
 }
 
 impl Replay {
@@ -264,6 +277,14 @@ impl Replay {
                     tracker
                 }
             };
+            // As the live tracker did: detections re-initialise their objects first.
+            for &(_, k, camera_from_object) in self.detections.due(frame.stamp_ns) {
+                tracker.reinitialise(k, &camera_from_object);
+                self.detections_applied += 1;
+                if let Some((file, channels)) = output.as_deref_mut() {
+                    channels.write_detection(file, k, frame.stamp_ns, &camera_from_object)?;
+                }
+            }
             // The next frame is read and decoded beside the step, on the same workers.
             let out = &mut self.out;
             let spare_buffers = std::mem::take(&mut spare);
@@ -350,6 +371,13 @@ pub fn print_summary(s: &ReplaySummary) {
                 startup * 1e3
             );
         }
+    }
+    let (applied, recorded, unreadable) = s.detections;
+    if recorded + unreadable > 0 {
+        println!("detections recorded with the live run: {applied} of {recorded} applied again before their frames");
+    }
+    if unreadable > 0 {
+        println!("warning: {unreadable} detection messages could not be decoded (skipped)");
     }
     // A recording without a summary is streamed: a topic it lacks shows only here.
     let images = [

@@ -163,7 +163,8 @@ impl<F: WireFrame> LiveTracker<F> {
         let listener = frame_events.listener_builder().create().map_err(|e| err("listener", &frames_name, &e))?;
         let notifier =
             pose_events.notifier_builder().create().map_err(|e| err("pose notifier", &config.poses_service, &e))?;
-        let detections = DetectionInbox::open(&node, &config.detections_service, config.detection_max_age_ns)?;
+        let detections =
+            DetectionInbox::open(&node, &config.detections_service, config.detection_max_age_ns, tracker.len())?;
         let core = Core {
             out,
             tracker,
@@ -326,7 +327,7 @@ impl<F: WireFrame> Core<F> {
         self.notifier.notify().map_err(|e| IpcError::new("notifying pose subscribers", e))?;
         // Recorded after the poses are out: the copy does not delay them.
         if let (Some(recorder), Ok(frame)) = (&mut self.recorder, message.frame()) {
-            recorder.record(&frame, &self.out);
+            recorder.record(&frame, self.detections.applied(), &self.out);
         }
         drop(sample);
         summary.frames += 1;

@@ -48,6 +48,12 @@ pub fn object_pose_topic(name: &str) -> String {
     format!("/mrsmap/{name}/pose")
 }
 
+/// The topic of the detections applied to an object (`PoseStamped`: the detected
+/// `camera_from_object`, stamped with the frame it was applied before).
+pub fn object_detection_topic(name: &str) -> String {
+    format!("/mrsmap/{name}/detection")
+}
+
 /// How depth is stored.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum DepthEncoding {
@@ -231,11 +237,13 @@ pub struct ObjectPoseRecord<'a> {
 #[derive(Debug, Clone)]
 pub struct PoseChannels {
     objects: Vec<u16>,
+    detections: Vec<u16>,
     poses_in_frame: u16,
 }
 
 impl PoseChannels {
-    /// Adds a `PoseWithCovarianceStamped` channel per object and one `PosesInFrame`.
+    /// Adds a `PoseWithCovarianceStamped` channel per object, a `PoseStamped` channel
+    /// per object for the detections applied to it, and one `PosesInFrame`.
     pub fn add(file: &mut McapFile, names: &[String]) -> Result<Self, McapError> {
         let schema = ros2::pose_with_covariance_stamped_schema();
         let objects = names
@@ -244,7 +252,26 @@ impl PoseChannels {
                 file.add_ros2_channel(&object_pose_topic(n), "geometry_msgs/msg/PoseWithCovarianceStamped", &schema)
             })
             .collect::<Result<_, _>>()?;
-        Ok(PoseChannels { objects, poses_in_frame: file.add_poses_in_frame_channel(POSES_TOPIC)? })
+        let schema = ros2::pose_stamped_schema();
+        let detections = names
+            .iter()
+            .map(|n| file.add_ros2_channel(&object_detection_topic(n), "geometry_msgs/msg/PoseStamped", &schema))
+            .collect::<Result<_, _>>()?;
+        Ok(PoseChannels { objects, detections, poses_in_frame: file.add_poses_in_frame_channel(POSES_TOPIC)? })
+    }
+
+    /// Writes that `object` was re-initialised at the detected `camera_from_object`
+    /// before the frame stamped `stamp_ns`.
+    pub fn write_detection(
+        &self,
+        file: &mut McapFile,
+        object: usize,
+        stamp_ns: u64,
+        camera_from_object: &Pose,
+    ) -> Result<(), McapError> {
+        let header = Header { stamp: Time::from_ns(stamp_ns), frame_id: CAMERA_FRAME_ID.into() };
+        let message = ros2::PoseStamped { header, pose: ros_pose(camera_from_object) };
+        file.write_cdr(self.detections[object], stamp_ns, &message)
     }
 
     /// Writes the poses of the objects tracked in the frame stamped `stamp_ns`.
@@ -282,6 +309,16 @@ impl PoseChannels {
         }
         file.write(self.poses_in_frame, stamp_ns, &all.encode_to_vec())
     }
+}
+
+/// A ROS pose as a [`Pose`] (the quaternion normalised); `None` unless finite with a
+/// non-zero quaternion.
+pub fn pose_from_ros(p: &RosPose) -> Option<Pose> {
+    let o = &p.orientation;
+    let q = nalgebra::Quaternion::new(o.w, o.x, o.y, o.z);
+    let t = nalgebra::Translation3::new(p.position.x, p.position.y, p.position.z);
+    let finite = [t.x, t.y, t.z, o.x, o.y, o.z, o.w].iter().all(|v| v.is_finite());
+    (finite && q.norm() > 1e-9).then(|| Pose::from_parts(t, nalgebra::UnitQuaternion::from_quaternion(q)))
 }
 
 fn ros_pose(pose: &Pose) -> RosPose {

@@ -160,6 +160,15 @@ pub struct PoseWithCovarianceStamped {
     pub pose: PoseWithCovariance,
 }
 
+/// `geometry_msgs/PoseStamped`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PoseStamped {
+    /// Header.
+    pub header: Header,
+    /// Pose.
+    pub pose: RosPose,
+}
+
 const TIME: &str = "MSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n";
 const HEADER: &str = "MSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n";
 const SEPARATOR: &str = "================================================================================\n";
@@ -182,6 +191,13 @@ pub fn camera_info_schema() -> String {
 pub fn pose_with_covariance_stamped_schema() -> String {
     format!(
         "std_msgs/Header header\ngeometry_msgs/PoseWithCovariance pose\n{SEPARATOR}{HEADER}{SEPARATOR}{TIME}{SEPARATOR}MSG: geometry_msgs/PoseWithCovariance\ngeometry_msgs/Pose pose\nfloat64[36] covariance\n{SEPARATOR}MSG: geometry_msgs/Pose\ngeometry_msgs/Point position\ngeometry_msgs/Quaternion orientation\n{SEPARATOR}MSG: geometry_msgs/Point\nfloat64 x\nfloat64 y\nfloat64 z\n{SEPARATOR}MSG: geometry_msgs/Quaternion\nfloat64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n"
+    )
+}
+
+/// The `ros2msg` schema of `geometry_msgs/msg/PoseStamped`.
+pub fn pose_stamped_schema() -> String {
+    format!(
+        "std_msgs/Header header\ngeometry_msgs/Pose pose\n{SEPARATOR}{HEADER}{SEPARATOR}{TIME}{SEPARATOR}MSG: geometry_msgs/Pose\ngeometry_msgs/Point position\ngeometry_msgs/Quaternion orientation\n{SEPARATOR}MSG: geometry_msgs/Point\nfloat64 x\nfloat64 y\nfloat64 z\n{SEPARATOR}MSG: geometry_msgs/Quaternion\nfloat64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n"
     )
 }
 
