@@ -17,7 +17,9 @@ fn help_teaches_the_commands() {
     let out = mrsmap(&["--help"]);
     assert!(out.status.success());
     let text = String::from_utf8_lossy(&out.stdout);
-    for word in ["demo", "camera", "track", "poses", "replay", "convert", "odometry", "map", "model", "eval", "bench"] {
+    for word in
+        ["demo", "camera", "track", "poses", "detect", "replay", "convert", "odometry", "map", "model", "eval", "bench"]
+    {
         assert!(text.contains(word), "{text}");
     }
     let out = mrsmap(&["odometry", "--help"]);
@@ -275,6 +277,28 @@ fn zero_counts_and_empty_service_names_are_refused() {
         assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
         assert!(err.contains(&format!("for '{flag} ")) && err.contains(says), "{args:?}: {err}");
     }
+}
+
+#[test]
+fn a_detection_is_checked_before_it_is_sent() {
+    let id = format!("mrsmap_test_{}_detect_cli", std::process::id());
+    let (detections, poses) = (format!("{id}/detections"), format!("{id}/poses"));
+    let at = |pose: &[&str], object: &str| {
+        let mut args = vec!["detect", "--object", object, "--service", &detections, "--poses", &poses, "--pose"];
+        args.extend(pose);
+        let out = mrsmap(&args);
+        (out.status.code(), String::from_utf8_lossy(&out.stderr).into_owned())
+    };
+    let (code, err) = at(&["0", "0", "1", "0", "0", "0", "2"], "teddy");
+    assert!(code == Some(1) && err.contains("--pose") && err.contains("norm 2.0000"), "{err}");
+    let (code, err) = at(&["0", "0", "NaN", "0", "0", "0", "1"], "teddy");
+    assert!(code == Some(1) && err.contains("not finite"), "{err}");
+    let (code, err) = at(&["0", "0", "1", "0", "0", "0", "1"], &"x".repeat(32));
+    assert!(code == Some(1) && err.contains("1 to 31 bytes"), "{err}");
+    let (code, err) = at(&["0", "0", "1", "0", "0", "0", "1"], "teddy");
+    assert!(code == Some(1) && err.contains(&format!("no tracker publishes poses on {poses}")), "{err}");
+    let (code, err) = at(&["0", "0", "1", "0", "0"], "teddy");
+    assert!(code == Some(2) && err.contains("7 values required"), "{err}");
 }
 
 #[test]
@@ -564,7 +588,7 @@ fn offline_tracking_every_nth_frame() {
         max_frames: None,
         qvga: true,
         start_at_ground_truth: false,
-        reinitialise_at_ground_truth: false,
+        detector: None,
         trajectory: None,
         stop: Default::default(),
     };

@@ -139,7 +139,7 @@ fn track_dataset_stopped_early_writes_the_frames_tracked() {
         max_frames: None,
         qvga: true,
         start_at_ground_truth: false,
-        reinitialise_at_ground_truth: false,
+        detector: None,
         trajectory: Some(dir.join("track.txt")),
         stop: Stop::after_frames(3),
     };

@@ -284,7 +284,7 @@ fn job_template(dir: &Path) -> mrsmap::app::track_dataset::TrackDatasetJob {
         max_frames: None,
         qvga: false,
         start_at_ground_truth: false,
-        reinitialise_at_ground_truth: false,
+        detector: None,
         trajectory: Some(dir.join("dataset.txt")),
         stop: Default::default(),
     }

@@ -12,8 +12,10 @@ use crate::io::camera_file::read_camera;
 use crate::io::frames::FrameLoader;
 use crate::io::tracker_config::TrackerConfig;
 use crate::io::tum::{TumDataset, format_stamp, write_trajectory};
+use crate::synthetic::Pcg32;
 use crate::tracking::TrackingStatus;
 use anyhow::{Context, Result, bail};
+use nalgebra::{Translation3, UnitQuaternion, Vector3};
 use std::path::PathBuf;
 
 /// What to run.
@@ -34,9 +36,9 @@ pub struct TrackDatasetJob {
     /// Start every object at its ground-truth pose (from the dataset's ground truth and
     /// the model's `world_from_model`) instead of the configured one.
     pub start_at_ground_truth: bool,
-    /// Before each frame, re-initialise every object that is not tracking at its
-    /// ground-truth pose (a perfect detector's answer).
-    pub reinitialise_at_ground_truth: bool,
+    /// Before each frame, re-initialise every object that is not tracking where this
+    /// simulated detector says: at its ground-truth pose, perhaps late and off.
+    pub detector: Option<SimulatedDetector>,
     /// Write each object's `object_from_camera` trajectory here.
     pub trajectory: Option<PathBuf>,
     /// Stops the run before its next frame; the frames tracked so far are written.
@@ -52,6 +54,8 @@ pub struct TrackDatasetSummary {
     pub interrupted: Option<Interrupted>,
     /// The model of the published covariances.
     pub covariance: crate::tracking::CovarianceModel,
+    /// How lost objects were re-initialised ([`SimulatedDetector`]), if they were.
+    pub detector: Option<String>,
 }
 
 /// Per-object results.
@@ -63,12 +67,66 @@ pub struct ObjectResult {
     pub statuses: [usize; 4],
     /// Of the frames tracking, those whose registration failed (the pose held).
     pub held: usize,
-    /// Re-initialisations at the ground truth (`reinitialise_at_ground_truth`).
+    /// Re-initialisations by the simulated detector.
     pub reinitialised: usize,
     /// Tracking time per frame (ms).
     pub track_ms: Vec<f64>,
     /// Accuracy against the ground truth, if the dataset has it.
     pub accuracy: ObjectAccuracy,
+}
+
+/// A detector simulated from the ground truth: it finds every object, `latency_frames`
+/// frames late (the pose in the frame that many tracked frames before), `error_m` and
+/// `error_rad` off (the object shifted and turned by those amounts in the camera frame,
+/// in random directions drawn with a fixed seed). All zero: a perfect detector.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct SimulatedDetector {
+    /// Frames between the one it looked at and the one re-initialised.
+    pub latency_frames: usize,
+    /// Size of its translation error (m).
+    pub error_m: f64,
+    /// Size of its rotation error (rad).
+    pub error_rad: f64,
+}
+
+impl SimulatedDetector {
+    /// `camera_from_object` as this detector reports it: the object's position off by
+    /// `error_m` and its orientation turned by `error_rad` about an axis through its
+    /// origin.
+    fn detect(&self, camera_from_object: &Pose, rng: &mut Pcg32) -> Pose {
+        if self.error_m == 0.0 && self.error_rad == 0.0 {
+            return *camera_from_object;
+        }
+        let shift = random_unit(rng) * self.error_m;
+        let turn = UnitQuaternion::from_scaled_axis(random_unit(rng) * self.error_rad);
+        Pose::from_parts(
+            Translation3::from(camera_from_object.translation.vector + shift),
+            turn * camera_from_object.rotation,
+        )
+    }
+
+    /// How it is said in the summary.
+    fn describe(&self) -> String {
+        if *self == SimulatedDetector::default() {
+            return "at the ground truth".into();
+        }
+        format!(
+            "by a detector {:.0} mm and {:.1}° off, {} frame(s) late",
+            self.error_m * 1e3,
+            self.error_rad.to_degrees(),
+            self.latency_frames
+        )
+    }
+}
+
+/// A direction drawn uniformly on the unit sphere.
+fn random_unit(rng: &mut Pcg32) -> Vector3<f64> {
+    loop {
+        let v = Vector3::new(rng.normal(), rng.normal(), rng.normal());
+        if v.norm() > 1e-6 {
+            return v.normalize();
+        }
+    }
 }
 
 /// Tracks every object through the dataset.
@@ -105,14 +163,17 @@ pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<TrackDataset
     let mut published: Vec<Vec<Published>> = vec![Vec::new(); tracker.len()];
     let bar = progress_bar(frames.len() as u64, "tracking");
     let mut interrupted = None;
+    let mut rng = Pcg32::new(1);
     for (index, entry) in frames.iter().enumerate() {
         interrupted = job.stop.before_frame(index, Some(frames.len()));
         if interrupted.is_some() {
             break;
         }
         bar.inc(1);
-        if job.reinitialise_at_ground_truth && index > 0 {
-            reinitialise_lost(&mut tracker, &out, gt_at(entry.depth_stamp_ns), &world_from_model, &mut results);
+        if let Some(detector) = job.detector.filter(|_| index > 0) {
+            let seen = frames[index.saturating_sub(detector.latency_frames)].depth_stamp_ns;
+            let detection = Detection { detector, world_from_camera: gt_at(seen) };
+            reinitialise_lost(&mut tracker, &out, &detection, &world_from_model, &mut rng, &mut results);
         }
         match pool.install(|| loader.load(entry)) {
             Ok(frame) => track_frame(&mut tracker, &pool, &frame, &mut out, Workers::Spin),
@@ -149,22 +210,32 @@ pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<TrackDataset
         }
     }
     written?;
-    Ok(TrackDatasetSummary { objects: results, interrupted, covariance: config.params.covariance })
+    let detector = job.detector.map(|d| d.describe());
+    Ok(TrackDatasetSummary { objects: results, interrupted, covariance: config.params.covariance, detector })
 }
 
-/// Re-initialises every object whose last estimate was not tracking at its pose in
-/// `world_from_camera` (the ground truth of the coming frame, if it has one).
+/// What the simulated detector sees: the camera's ground-truth pose in the frame it
+/// looked at.
+struct Detection {
+    detector: SimulatedDetector,
+    world_from_camera: Option<Pose>,
+}
+
+/// Re-initialises every object whose last estimate was not tracking where the detector
+/// finds it (nowhere when its frame has no ground truth).
 fn reinitialise_lost(
     tracker: &mut crate::tracking::Tracker,
     out: &StepOutput,
-    world_from_camera: Option<Pose>,
+    detection: &Detection,
     world_from_model: &[Pose],
+    rng: &mut Pcg32,
     results: &mut [ObjectResult],
 ) {
-    let Some(world_from_camera) = world_from_camera else { return };
+    let Some(world_from_camera) = detection.world_from_camera else { return };
     for (k, r) in results.iter_mut().enumerate() {
         if out.estimates[k].status != TrackingStatus::Tracking {
-            tracker.reinitialise(k, &(world_from_camera.inverse() * world_from_model[k]));
+            let camera_from_object = world_from_camera.inverse() * world_from_model[k];
+            tracker.reinitialise(k, &detection.detector.detect(&camera_from_object, rng));
             r.reinitialised += 1;
         }
     }
@@ -175,8 +246,8 @@ pub fn print_summary(summary: &TrackDatasetSummary) {
     for r in &summary.objects {
         let [t, l, i, v] = r.statuses;
         println!("{}: {t} frames tracking ({} held), {l} lost, {i} initialising, {v} invalid", r.name, r.held);
-        if r.reinitialised > 0 {
-            println!("  re-initialised at the ground truth before {} frames", r.reinitialised);
+        if let (true, Some(how)) = (r.reinitialised > 0, &summary.detector) {
+            println!("  re-initialised {how} before {} frames", r.reinitialised);
         }
         if !r.track_ms.is_empty() {
             println!(
@@ -186,5 +257,24 @@ pub fn print_summary(summary: &TrackDatasetSummary) {
             );
         }
         r.accuracy.print(summary.covariance);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_simulated_detector_errs_by_what_it_is_told() {
+        let truth =
+            Pose::from_parts(Translation3::new(0.1, -0.2, 0.8), UnitQuaternion::from_euler_angles(0.3, 1.0, -0.4));
+        let mut rng = Pcg32::new(7);
+        assert_eq!(SimulatedDetector::default().detect(&truth, &mut rng), truth);
+        let detector = SimulatedDetector { latency_frames: 0, error_m: 0.01, error_rad: 3f64.to_radians() };
+        for _ in 0..20 {
+            let seen = detector.detect(&truth, &mut rng);
+            assert!(((seen.translation.vector - truth.translation.vector).norm() - 0.01).abs() < 1e-12);
+            assert!((seen.rotation.angle_to(&truth.rotation) - 3f64.to_radians()).abs() < 1e-9);
+        }
     }
 }

@@ -295,10 +295,11 @@ impl<F: WireFrame> Core<F> {
             summary.skipped_frames += header.sequence - last - 1;
         }
         self.last_sequence = Some(header.sequence);
-        // Detections that came since the last frame re-initialise their objects first.
-        self.detections.take(&mut self.tracker, header.capture_stamp_ns)?;
         let invalid = match message.frame() {
             Ok(frame) => {
+                // Detections that came since the last frame re-initialise their objects
+                // first (they wait in the queue through invalid frames).
+                self.detections.take(&mut self.tracker, header.capture_stamp_ns)?;
                 track_frame(&mut self.tracker, &self.pool, &frame, &mut self.out, Workers::Sleep);
                 false
             }

@@ -169,6 +169,15 @@ pub struct TrackArgs {
     /// the re-initialisations. Implies --start-at-ground-truth.
     #[arg(long, requires = "dataset")]
     pub reinitialise_at_ground_truth: bool,
+    /// Offline, with --reinitialise-at-ground-truth: a detector that errs by this much,
+    /// a shift of MM and a turn of DEG about random axes (fixed seed), instead of a
+    /// perfect one.
+    #[arg(long, num_args = 2, value_names = ["MM", "DEG"], requires = "reinitialise_at_ground_truth")]
+    pub detector_error: Option<Vec<f64>>,
+    /// Offline, with --reinitialise-at-ground-truth: a detector this many frames late
+    /// (it reports the pose in the frame that many frames before).
+    #[arg(long, default_value_t = 0, requires = "reinitialise_at_ground_truth")]
+    pub detector_latency: usize,
     /// Offline: write object_from_camera per object (TUM format).
     #[arg(long, requires = "dataset")]
     pub trajectory: Option<PathBuf>,

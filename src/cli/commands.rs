@@ -59,6 +59,8 @@ pub fn track(a: TrackArgs) -> Result<ExitCode> {
         anyhow::bail!("the detection and pose services are both {}: they must differ", config.poses_service);
     }
     if let Some(dataset) = a.dataset {
+        let detector =
+            simulated_detector(a.reinitialise_at_ground_truth, a.detector_error.as_deref(), a.detector_latency)?;
         let camera = a.camera.ok_or_else(|| anyhow::anyhow!("--dataset needs --camera (the dataset's camera file)"))?;
         let mut inputs = dataset_and_camera(&dataset, Some(&camera));
         inputs.extend(tracker_inputs(&a.config, &config));
@@ -72,7 +74,7 @@ pub fn track(a: TrackArgs) -> Result<ExitCode> {
             max_frames: a.max_frames.map(|m| m as usize),
             qvga: a.qvga,
             start_at_ground_truth: a.start_at_ground_truth || a.reinitialise_at_ground_truth,
-            reinitialise_at_ground_truth: a.reinitialise_at_ground_truth,
+            detector,
             trajectory: a.trajectory,
             stop: Stop::on_signals()?,
         };
@@ -220,21 +222,45 @@ pub fn poses(a: PosesArgs) -> Result<()> {
     Ok(())
 }
 
+/// The detector `track --dataset --reinitialise-at-ground-truth` simulates.
+fn simulated_detector(
+    on: bool,
+    error: Option<&[f64]>,
+    latency_frames: usize,
+) -> Result<Option<app::track_dataset::SimulatedDetector>> {
+    if !on {
+        return Ok(None);
+    }
+    let (error_mm, error_deg) = match error {
+        Some(&[mm, deg]) => (mm, deg),
+        _ => (0.0, 0.0),
+    };
+    if !(error_mm.is_finite() && error_mm >= 0.0 && error_deg.is_finite() && error_deg >= 0.0) {
+        anyhow::bail!("--detector-error takes millimetres and degrees >= 0, not {error_mm} {error_deg}");
+    }
+    Ok(Some(app::track_dataset::SimulatedDetector {
+        latency_frames,
+        error_m: error_mm * 1e-3,
+        error_rad: error_deg.to_radians(),
+    }))
+}
+
 /// `mrsmap detect`.
 pub fn detect(a: DetectArgs) -> Result<()> {
+    use mrsmap::io::wire::ObjectDetection;
     let [tx, ty, tz, qx, qy, qz, qw] = a.pose[..] else { anyhow::bail!("--pose takes 7 numbers") };
-    let q = nalgebra::Quaternion::new(qw, qx, qy, qz);
-    if !a.pose.iter().all(|v| v.is_finite()) || (q.norm() - 1.0).abs() > 1e-3 {
-        anyhow::bail!("--pose must be finite, with a unit quaternion (its norm is {:.4})", q.norm());
-    }
+    // Checked as the tracker checks the message.
+    let message = ObjectDetection {
+        translation_m: [tx, ty, tz],
+        rotation_xyzw: [qx, qy, qz, qw],
+        ..ObjectDetection::new("", &mrsmap::geometry::Pose::identity(), 0, 0)
+    };
+    let camera_from_object = message.camera_from_object().map_err(|e| anyhow::anyhow!("--pose: {e}"))?;
     let job = app::detect_client::DetectJob {
         service: a.service,
         poses_service: a.poses,
         object: a.object,
-        camera_from_object: mrsmap::geometry::Pose::from_parts(
-            nalgebra::Translation3::new(tx, ty, tz),
-            nalgebra::UnitQuaternion::from_quaternion(q),
-        ),
+        camera_from_object,
         frame_stamp_ns: a.frame_stamp_ns.unwrap_or(0),
         always: a.always,
         timeout: seconds(Some(a.timeout), "--timeout")?.unwrap_or_default(),
