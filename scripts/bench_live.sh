@@ -15,6 +15,7 @@ trap 'kill $(jobs -p) 2>/dev/null || true; rm -rf "$OUT"' EXIT
 TAG="mrsmap_bench_$$"
 sed -e "s#^service = \"mrsmap/camera0\"#service = \"$TAG/camera\"#" \
     -e "s#^service = \"mrsmap/poses\"#service = \"$TAG/poses\"#" \
+    -e "s#^service = \"mrsmap/detections\"#service = \"$TAG/detections\"#" \
     -e "s#^size = \"vga\"#size = \"$SIZE\"#" \
     -e "s#^pin_threads = true #pin_threads = ${PIN:-true} #" \
     -e "s#\"\.\./models/#\"$PWD/models/#" robot_config/tracker.toml > "$OUT/tracker.toml"
