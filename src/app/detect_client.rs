@@ -2,7 +2,7 @@
 //! what the tracker made of it — the example to copy when connecting a detector (a pose
 //! estimator, a fiducial marker) to the tracker.
 
-use super::poses_client::{camera_from_object, object_name};
+use super::poses_client::{camera_from_object, object_name, status_name};
 use crate::geometry::Pose;
 use crate::io::ipc::{self, IpcError, now_ns};
 use crate::io::wire::{ObjectDetection, ObjectPose, detection_mode, status};
@@ -147,12 +147,7 @@ pub fn report(job: &DetectJob, outcome: &Outcome) -> Result<()> {
         Outcome::NotFound(pose) => bail!(
             "the tracker did not find '{name}' at the detected pose (status {}, quality {:.2}); the pose is \
              camera_from_object in metres, in the camera's optical frame (x right, y down, z forward)",
-            match pose.status {
-                status::LOST => "lost",
-                status::INITIALISING => "initialising",
-                status::INVALID_FRAME => "invalid frame",
-                _ => "tracking (held)",
-            },
+            status_name(pose),
             pose.quality
         ),
     }

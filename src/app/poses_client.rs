@@ -11,7 +11,6 @@ use crate::io::wire::{LAYOUT_VERSION, ObjectPose, status};
 use anyhow::Result;
 use iceoryx2::node::Node;
 use iceoryx2::service::port_factory::PortFactory as _;
-use nalgebra::{Quaternion, Translation3, UnitQuaternion};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -53,9 +52,7 @@ pub struct PosesSummary {
 
 /// The pose in a message.
 pub fn camera_from_object(p: &ObjectPose) -> Pose {
-    let [x, y, z, w] = p.rotation_xyzw;
-    let [tx, ty, tz] = p.translation_m;
-    Pose::from_parts(Translation3::new(tx, ty, tz), UnitQuaternion::from_quaternion(Quaternion::new(w, x, y, z)))
+    crate::io::wire::pose_from_wire(p.translation_m, p.rotation_xyzw)
 }
 
 /// The object name in a message.
@@ -65,7 +62,7 @@ pub fn object_name(p: &ObjectPose) -> String {
 }
 
 /// The pose's status as said in print and in trajectories: a held pose as "held".
-fn status_name(p: &ObjectPose) -> &'static str {
+pub fn status_name(p: &ObjectPose) -> &'static str {
     match p.status {
         _ if p.is_held() => "held",
         status::TRACKING => "tracking",

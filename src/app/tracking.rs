@@ -146,8 +146,7 @@ pub fn invalid_frame(tracker: &Tracker, stamp_ns: u64, out: &mut StepOutput) {
 /// The wire message of object `k`'s estimate.
 pub fn pose_message(name: &str, out: &StepOutput, k: usize, frame: (u64, u64), total_ms: f32) -> ObjectPose {
     let e = &out.estimates[k];
-    let t = e.camera_from_object.translation.vector;
-    let q = e.camera_from_object.rotation.quaternion();
+    let (translation_m, rotation_xyzw) = wire::pose_to_wire(&e.camera_from_object);
     let mut covariance = [0.0; 36];
     for (i, c) in covariance.iter_mut().enumerate() {
         *c = e.covariance_ros[(i / 6, i % 6)];
@@ -159,8 +158,8 @@ pub fn pose_message(name: &str, out: &StepOutput, k: usize, frame: (u64, u64), t
         frame_sequence: frame.0,
         frame_send_stamp_ns: frame.1,
         publish_stamp_ns: crate::io::ipc::now_ns(),
-        translation_m: [t.x, t.y, t.z],
-        rotation_xyzw: [q.i, q.j, q.k, q.w],
+        translation_m,
+        rotation_xyzw,
         covariance,
         quality: e.quality,
         status: e.status as u32,

@@ -328,6 +328,23 @@ pub fn name_bytes(name: &str) -> [u8; 32] {
     bytes
 }
 
+/// A pose as the messages carry it: translation (m) and unit quaternion `x, y, z, w`.
+pub fn pose_to_wire(pose: &crate::geometry::Pose) -> ([f64; 3], [f64; 4]) {
+    let t = pose.translation.vector;
+    let q = pose.rotation.quaternion();
+    ([t.x, t.y, t.z], [q.i, q.j, q.k, q.w])
+}
+
+/// The pose of a message's translation (m) and quaternion `x, y, z, w` (normalised;
+/// unchecked: see [`ObjectDetection::camera_from_object`] for a checked one).
+pub fn pose_from_wire(translation_m: [f64; 3], rotation_xyzw: [f64; 4]) -> crate::geometry::Pose {
+    let ([tx, ty, tz], [x, y, z, w]) = (translation_m, rotation_xyzw);
+    crate::geometry::Pose::from_parts(
+        nalgebra::Translation3::new(tx, ty, tz),
+        nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z)),
+    )
+}
+
 /// How a detection is applied ([`ObjectDetection::mode`]).
 pub mod detection_mode {
     /// Only to an object that is not being tracked (lost or initialising): a detector
@@ -395,15 +412,14 @@ impl ObjectDetection {
     /// A detection of object `name` at `camera_from_object`, seen in the frame stamped
     /// `frame_stamp_ns` (0: no stamp).
     pub fn new(name: &str, camera_from_object: &crate::geometry::Pose, frame_stamp_ns: u64, mode: u32) -> Self {
-        let t = camera_from_object.translation.vector;
-        let q = camera_from_object.rotation.quaternion();
+        let (translation_m, rotation_xyzw) = pose_to_wire(camera_from_object);
         ObjectDetection {
             layout_version: LAYOUT_VERSION,
             mode,
             frame_stamp_ns,
             send_stamp_ns: 0,
-            translation_m: [t.x, t.y, t.z],
-            rotation_xyzw: [q.i, q.j, q.k, q.w],
+            translation_m,
+            rotation_xyzw,
             name: name_bytes(name),
         }
     }
@@ -425,18 +441,12 @@ impl ObjectDetection {
         if self.mode > detection_mode::ALWAYS {
             return Err(DetectionError::Mode(self.mode));
         }
-        let [x, y, z, w] = self.rotation_xyzw;
-        let q = nalgebra::Quaternion::new(w, x, y, z);
-        let norm = q.norm();
+        let norm = self.rotation_xyzw.iter().map(|v| v * v).sum::<f64>().sqrt();
         let finite = self.translation_m.iter().chain(&self.rotation_xyzw).all(|v| v.is_finite());
         if !finite || (norm - 1.0).abs() > 1e-3 {
             return Err(DetectionError::Pose { norm });
         }
-        let [tx, ty, tz] = self.translation_m;
-        Ok(crate::geometry::Pose::from_parts(
-            nalgebra::Translation3::new(tx, ty, tz),
-            nalgebra::UnitQuaternion::from_quaternion(q),
-        ))
+        Ok(pose_from_wire(self.translation_m, self.rotation_xyzw))
     }
 }
 
