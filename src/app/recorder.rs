@@ -7,7 +7,9 @@
 //! The tracker's loop only copies the frame into one of a few slots allocated at start-up
 //! and hands it over a bounded channel (neither allocates); a writer thread encodes,
 //! compresses and writes. When every slot is busy the frame is left out of the recording
-//! (counted), never delaying the tracker. The file is written as `<name>.partial` and
+//! (counted), never delaying the tracker; the detections applied before such a frame
+//! are held and written with the next frame that is recorded, under their own stamps
+//! (the replay applies them before that frame). The file is written as `<name>.partial` and
 //! renamed when finished, so a run stopped by SIGINT/SIGTERM leaves a complete file; one
 //! that crashes leaves a `.partial` file that replays up to its end.
 
@@ -59,11 +61,16 @@ struct PoseSnapshot {
     covariance_ros: Matrix6<f64>,
 }
 
+/// A detection the tracker applied: the stamp of the frame it was applied before, the
+/// object, the detected `camera_from_object`.
+type AppliedDetection = (u64, usize, Pose);
+
 struct Slot {
     frame: OwnedFrame,
     poses: Vec<PoseSnapshot>,
-    /// Objects re-initialised at a detection before this frame, and where.
-    detections: Vec<(usize, Pose)>,
+    /// Detections applied before this frame, and before frames left out of the recording
+    /// since the last recorded one (at most one per object each).
+    detections: Vec<AppliedDetection>,
     /// When the tracker handed it over (the ring's clock).
     received: Instant,
 }
@@ -73,7 +80,7 @@ impl Slot {
         Box::new(Slot {
             frame: OwnedFrame::with_capacity(pixels),
             poses: Vec::with_capacity(objects),
-            detections: Vec::with_capacity(objects),
+            detections: Vec::with_capacity(2 * objects),
             received: Instant::now(),
         })
     }
@@ -85,6 +92,8 @@ pub struct Recorder {
     full: Option<SyncSender<Box<Slot>>>,
     writer: Option<JoinHandle<Result<u64>>>,
     dropped: u64,
+    /// Detections applied before frames left out, for the next recorded frame.
+    held: HeldDetections,
     /// The writer thread has ended early (its error is returned by [`Recorder::finish`]).
     stopped: bool,
 }
@@ -133,6 +142,7 @@ impl Recorder {
         for _ in 0..SLOTS {
             free_tx.send(Slot::new(max_pixels, names.len())).map_err(|_| anyhow!("recorder slots"))?;
         }
+        let held = HeldDetections(Vec::with_capacity(names.len()));
         let names = names.to_vec();
         let writer = std::thread::Builder::new()
             .name("mrsmap-recorder".into())
@@ -171,24 +181,29 @@ impl Recorder {
                 Ok(written)
             })
             .context("starting the recorder thread")?;
-        Ok(Recorder { free, full: Some(full), writer: Some(writer), dropped: 0, stopped: false })
+        Ok(Recorder { free, full: Some(full), writer: Some(writer), dropped: 0, held, stopped: false })
     }
 
     /// Hands a frame, the detections applied before it (object, detected
     /// `camera_from_object`; at most one per object) and the poses tracked in it to the
-    /// writer; allocates nothing (the frame must not exceed the slots' `max_pixels`).
+    /// writer; allocates nothing (the frame must not exceed the slots' `max_pixels`). A
+    /// frame left out (every slot busy) leaves its detections for the next one.
     pub fn record(&mut self, frame: &RgbdFrame<'_>, detections: &[(usize, Pose)], out: &StepOutput) {
         if self.stopped {
             return;
         }
         let Ok(mut slot) = self.free.try_recv() else {
+            self.held.hold(detections.iter().map(|&(k, pose)| (frame.stamp_ns, k, pose)));
             self.dropped += 1;
             return;
         };
         slot.frame.copy_from(frame);
         slot.received = Instant::now();
         slot.detections.clear();
-        slot.detections.extend(detections.iter().take(slot.detections.capacity()));
+        let room = slot.detections.capacity();
+        slot.detections.extend(self.held.0.drain(..).take(room));
+        let room = room - slot.detections.len();
+        slot.detections.extend(detections.iter().map(|&(k, pose)| (frame.stamp_ns, k, pose)).take(room));
         slot.poses.clear();
         for (object, e) in out.estimates.iter().enumerate().take(slot.poses.capacity()) {
             if e.is_fresh() {
@@ -207,7 +222,11 @@ impl Recorder {
                     "tracker: the recording stopped: its file could not be written (the reason follows at the end); tracking goes on"
                 ));
             }
-            Some(Err(TrySendError::Full(_))) | None => self.dropped += 1,
+            Some(Err(TrySendError::Full(slot))) => {
+                self.held.hold(slot.detections.iter().copied());
+                self.dropped += 1;
+            }
+            None => self.dropped += 1,
         }
     }
 
@@ -220,6 +239,25 @@ impl Recorder {
             None => 0,
         };
         Ok(RecordStats { written, dropped: self.dropped })
+    }
+}
+
+/// Detections applied before frames left out of the recording, waiting for the next
+/// recorded frame: the newest per object (a later one re-initialised the object again, so
+/// the replay, which applies them before one frame, needs only it).
+struct HeldDetections(Vec<AppliedDetection>);
+
+impl HeldDetections {
+    /// Holds `detections`, replacing an earlier one of the same object; allocates
+    /// nothing while there are no more objects than the capacity.
+    fn hold(&mut self, detections: impl Iterator<Item = AppliedDetection>) {
+        for d in detections {
+            if let Some(held) = self.0.iter_mut().find(|held| held.1 == d.1) {
+                *held = d;
+            } else if self.0.len() < self.0.capacity() {
+                self.0.push(d);
+            }
+        }
     }
 }
 
@@ -308,8 +346,8 @@ struct Output {
 impl Output {
     fn write(&mut self, slot: &Slot) -> Result<()> {
         let Some(frame) = slot.frame.view() else { return Ok(()) };
-        for (object, camera_from_object) in &slot.detections {
-            self.poses.write_detection(&mut self.file, *object, frame.stamp_ns, camera_from_object)?;
+        for (stamp_ns, object, camera_from_object) in &slot.detections {
+            self.poses.write_detection(&mut self.file, *object, *stamp_ns, camera_from_object)?;
         }
         self.frames.write_frame(&mut self.file, &frame, frame.stamp_ns, &mut self.scratch)?;
         let records: Vec<ObjectPoseRecord<'_>> = slot
@@ -331,6 +369,53 @@ impl Output {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A recorder without a writer thread: the test hands it free slots and takes what it
+    /// sends to the writer.
+    fn recorder_without_writer(objects: usize) -> (Recorder, SyncSender<Box<Slot>>, Receiver<Box<Slot>>) {
+        let (free_tx, free) = sync_channel(SLOTS);
+        let (full, full_rx) = sync_channel(SLOTS);
+        let held = HeldDetections(Vec::with_capacity(objects));
+        let recorder = Recorder { free, full: Some(full), writer: None, dropped: 0, held, stopped: false };
+        (recorder, free_tx, full_rx)
+    }
+
+    #[test]
+    fn detections_before_a_frame_left_out_are_written_with_the_next() {
+        let at =
+            |x: f64| Pose::from_parts(nalgebra::Translation3::new(x, 0.0, 1.0), nalgebra::UnitQuaternion::identity());
+        let (mut recorder, free_tx, full_rx) = recorder_without_writer(2);
+        let (rgb, depth) = ([0u8; 6], [1000u16; 2]);
+        let camera = crate::geometry::CameraModel {
+            width: 2,
+            height: 1,
+            intrinsics: crate::geometry::PinholeIntrinsics { fx: 2.0, fy: 2.0, cx: 1.0, cy: 0.5 },
+            distortion: crate::geometry::NO_DISTORTION,
+            depth_scale_m: 0.001,
+        };
+        let frame = |stamp_ns| RgbdFrame::new(stamp_ns, camera, &rgb, &depth).expect("frame");
+        let out = StepOutput::new(2);
+        // Every slot busy: three frames are left out, with detections of both objects
+        // before them; object 0's second replaces its first.
+        recorder.record(&frame(10), &[(0, at(0.1))], &out);
+        recorder.record(&frame(20), &[(1, at(0.2))], &out);
+        recorder.record(&frame(30), &[(0, at(0.3))], &out);
+        assert_eq!(recorder.dropped, 3);
+        assert!(full_rx.try_recv().is_err());
+        // A slot is free again: the next frame carries the held detections, under the
+        // stamps of the frames they were applied before, then its own.
+        free_tx.send(Slot::new(2, 2)).expect("slot");
+        recorder.record(&frame(40), &[(1, at(0.4))], &out);
+        let slot = full_rx.try_recv().expect("the frame goes to the writer");
+        assert_eq!(slot.frame.stamp_ns, 40);
+        let written: Vec<(u64, usize, f64)> =
+            slot.detections.iter().map(|&(stamp, k, pose)| (stamp, k, pose.translation.x)).collect();
+        assert_eq!(written, [(30, 0, 0.3), (20, 1, 0.2), (40, 1, 0.4)]);
+        // Nothing is held twice.
+        free_tx.send(slot).expect("slot");
+        recorder.record(&frame(50), &[], &out);
+        assert!(full_rx.try_recv().expect("frame").detections.is_empty());
+    }
 
     #[test]
     fn the_ring_keeps_the_last_seconds_received_and_reuses_buffers() {
