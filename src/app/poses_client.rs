@@ -52,7 +52,7 @@ pub struct PosesSummary {
 
 /// The pose in a message.
 pub fn camera_from_object(p: &ObjectPose) -> Pose {
-    crate::io::wire::pose_from_wire(p.translation_m, p.rotation_xyzw)
+    crate::geometry::se3::pose_from_xyzw(p.translation_m, p.rotation_xyzw)
 }
 
 /// The object name in a message.

@@ -40,6 +40,29 @@ pub fn left_log(pose: &Pose) -> Vector6<f64> {
     Vector6::new(t.x, t.y, t.z, w.x, w.y, w.z)
 }
 
+/// A pose from a translation (m) and a quaternion `x, y, z, w` (the order of ROS, TUM
+/// files and the wire types), the quaternion normalised.
+pub fn pose_from_xyzw(translation_m: [f64; 3], rotation_xyzw: [f64; 4]) -> Pose {
+    let ([tx, ty, tz], [x, y, z, w]) = (translation_m, rotation_xyzw);
+    Isometry3::from_parts(
+        Translation3::new(tx, ty, tz),
+        UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z)),
+    )
+}
+
+/// [`pose_from_xyzw`] for a pose that a person or a program wrote down: every number
+/// finite and the quaternion a unit one (its norm within 1e-3 of 1). Otherwise the
+/// quaternion's norm, for the caller's message (NaN when a number is not finite).
+pub fn unit_pose_from_xyzw(translation_m: [f64; 3], rotation_xyzw: [f64; 4]) -> Result<Pose, f64> {
+    let norm = rotation_xyzw.iter().map(|v| v * v).sum::<f64>().sqrt();
+    let finite = translation_m.iter().chain(&rotation_xyzw).all(|v| v.is_finite());
+    match (finite, (norm - 1.0).abs() <= 1e-3) {
+        (true, true) => Ok(pose_from_xyzw(translation_m, rotation_xyzw)),
+        (true, false) => Err(norm),
+        (false, _) => Err(f64::NAN),
+    }
+}
+
 /// Translation distance (m) and rotation angle (rad) between two poses.
 pub fn pose_distance(a: &Pose, b: &Pose) -> (f64, f64) {
     let rel = a.inverse() * b;
@@ -84,6 +107,20 @@ pub fn left_adjoint(pose: &Pose) -> Matrix6<f64> {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    #[test]
+    fn poses_from_xyzw_are_checked() {
+        let half = std::f64::consts::FRAC_1_SQRT_2;
+        let pose = unit_pose_from_xyzw([1.0, 2.0, 3.0], [0.0, 0.0, half, half]).expect("a unit quaternion");
+        assert!((pose.rotation.angle() - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
+        assert!((pose.rotation.axis().expect("axis").z - 1.0).abs() < 1e-12);
+        assert_eq!(pose.translation.vector, Vector3::new(1.0, 2.0, 3.0));
+        assert_eq!(unit_pose_from_xyzw([0.0; 3], [0.0, 0.0, 0.0, 2.0]), Err(2.0));
+        assert!(unit_pose_from_xyzw([f64::NAN, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]).is_err_and(f64::is_nan));
+        assert!(unit_pose_from_xyzw([0.0; 3], [0.0, 0.0, 0.0, f64::INFINITY]).is_err_and(f64::is_nan));
+        // Unchecked: normalised.
+        assert_eq!(pose_from_xyzw([0.0; 3], [0.0, 0.0, 0.0, 2.0]).rotation, UnitQuaternion::identity());
+    }
 
     fn pose_strategy() -> impl Strategy<Value = Pose> {
         (prop::array::uniform3(-2.0f64..2.0), prop::array::uniform3(-1.5f64..1.5)).prop_map(|(t, w)| {

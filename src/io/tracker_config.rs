@@ -45,8 +45,9 @@
 
 use super::ipc::FrameSize;
 use crate::geometry::Pose;
+use crate::geometry::se3::unit_pose_from_xyzw;
 use crate::tracking::{CovarianceModel, SearchRegion, TrackerParams};
-use nalgebra::{Quaternion, Translation3, UnitQuaternion};
+
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 use thiserror::Error;
@@ -296,13 +297,10 @@ pub fn parse_tracker_config(text: &str, origin: &Path) -> Result<TrackerConfig, 
 
 fn object(o: RawObject, base: &Path) -> Result<ObjectConfig, String> {
     let [tx, ty, tz, qx, qy, qz, qw] = o.camera_from_object;
-    if !o.camera_from_object.iter().all(|v| v.is_finite()) {
-        return Err(format!("object {}: camera_from_object must be finite", o.name));
-    }
-    let q = Quaternion::new(qw, qx, qy, qz);
-    if (q.norm() - 1.0).abs() > 1e-3 {
-        return Err(format!("object {}: the quaternion of camera_from_object has norm {:.4}, not 1", o.name, q.norm()));
-    }
+    let camera_from_object = unit_pose_from_xyzw([tx, ty, tz], [qx, qy, qz, qw]).map_err(|norm| match norm {
+        n if n.is_nan() => format!("object {}: camera_from_object must be finite", o.name),
+        n => format!("object {}: the quaternion of camera_from_object has norm {n:.4}, not 1", o.name),
+    })?;
     let non_negative = |v: f64| v.is_finite() && v >= 0.0;
     if !non_negative(o.search_translation_m) || !non_negative(o.search_yaw_deg) {
         return Err(format!("object {}: search_translation_m and search_yaw_deg must be >= 0", o.name));
@@ -314,7 +312,7 @@ fn object(o: RawObject, base: &Path) -> Result<ObjectConfig, String> {
     Ok(ObjectConfig {
         name: o.name,
         model,
-        camera_from_object: Pose::from_parts(Translation3::new(tx, ty, tz), UnitQuaternion::from_quaternion(q)),
+        camera_from_object,
         search: SearchRegion { translation_m: o.search_translation_m, yaw_rad: o.search_yaw_deg.to_radians() },
     })
 }

@@ -7,7 +7,8 @@
 //! frame (`world_from_camera`), stamped with the depth image's timestamp.
 
 use crate::geometry::Pose;
-use nalgebra::{Quaternion, Translation3, UnitQuaternion};
+use crate::geometry::se3::pose_from_xyzw;
+use nalgebra::Translation3;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use thiserror::Error;
@@ -248,12 +249,11 @@ impl Trajectory {
                     return Err(parse_err(format!("non-finite number {field:?}")));
                 }
             }
-            let q = Quaternion::new(v[7], v[4], v[5], v[6]);
-            if q.norm() < 1e-6 {
+            if v[4..].iter().map(|c| c * c).sum::<f64>().sqrt() < 1e-6 {
                 return Err(parse_err("zero quaternion".into()));
             }
             t.stamps.push(v[0]);
-            t.poses.push(Pose::from_parts(Translation3::new(v[1], v[2], v[3]), UnitQuaternion::from_quaternion(q)));
+            t.poses.push(pose_from_xyzw([v[1], v[2], v[3]], [v[4], v[5], v[6], v[7]]));
         }
         if t.stamps.is_empty() {
             return Err(TumError::Empty { path: path.to_path_buf(), message: "no poses".into() });

@@ -335,16 +335,6 @@ pub fn pose_to_wire(pose: &crate::geometry::Pose) -> ([f64; 3], [f64; 4]) {
     ([t.x, t.y, t.z], [q.i, q.j, q.k, q.w])
 }
 
-/// The pose of a message's translation (m) and quaternion `x, y, z, w` (normalised;
-/// unchecked: see [`ObjectDetection::camera_from_object`] for a checked one).
-pub fn pose_from_wire(translation_m: [f64; 3], rotation_xyzw: [f64; 4]) -> crate::geometry::Pose {
-    let ([tx, ty, tz], [x, y, z, w]) = (translation_m, rotation_xyzw);
-    crate::geometry::Pose::from_parts(
-        nalgebra::Translation3::new(tx, ty, tz),
-        nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z)),
-    )
-}
-
 /// How a detection is applied ([`ObjectDetection::mode`]).
 pub mod detection_mode {
     /// Only to an object that is not being tracked (lost or initialising): a detector
@@ -441,12 +431,8 @@ impl ObjectDetection {
         if self.mode > detection_mode::ALWAYS {
             return Err(DetectionError::Mode(self.mode));
         }
-        let norm = self.rotation_xyzw.iter().map(|v| v * v).sum::<f64>().sqrt();
-        let finite = self.translation_m.iter().chain(&self.rotation_xyzw).all(|v| v.is_finite());
-        if !finite || (norm - 1.0).abs() > 1e-3 {
-            return Err(DetectionError::Pose { norm });
-        }
-        Ok(pose_from_wire(self.translation_m, self.rotation_xyzw))
+        crate::geometry::se3::unit_pose_from_xyzw(self.translation_m, self.rotation_xyzw)
+            .map_err(|norm| DetectionError::Pose { norm })
     }
 }
 

@@ -220,7 +220,6 @@ impl Model {
     /// `world_from_model` of the header as a pose.
     pub fn world_from_model(&self) -> crate::geometry::Pose {
         let [tx, ty, tz, qx, qy, qz, qw] = self.header.world_from_model;
-        let q = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(qw, qx, qy, qz));
-        crate::geometry::Pose::from_parts(nalgebra::Translation3::new(tx, ty, tz), q)
+        crate::geometry::se3::pose_from_xyzw([tx, ty, tz], [qx, qy, qz, qw])
     }
 }
