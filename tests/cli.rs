@@ -640,3 +640,49 @@ fn out_pid(err: &str, name: &str) -> String {
     let start = err[..end].rfind("mrsmap-rescued-").expect("its prefix") + "mrsmap-rescued-".len();
     err[start..end].to_string()
 }
+
+/// `eval tracking-quality --trials-csv` writes every registration, one row each, for a
+/// rule of one's own.
+#[test]
+fn the_quality_measurement_writes_every_registration() {
+    let dir = temp_dir("cli-trials-csv");
+    let config = root().join("robot_config/tracker.toml");
+    let clip = root().join("tests/data/fr3_teddy_8");
+    let camera = root().join("robot_config/cameras/tum_fr3.toml");
+    let quality = [
+        "eval",
+        "tracking-quality",
+        "--config",
+        path_str(&config),
+        "--dataset",
+        path_str(&clip),
+        "--camera",
+        path_str(&camera),
+    ];
+    // A file that cannot be written is refused before the run.
+    let lost = ["--trials-csv", "/no/such/folder/trials.csv"];
+    let out = mrsmap(&quality.iter().copied().chain(lost).collect::<Vec<_>>());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.code() == Some(1) && err.starts_with("error: --trials-csv ") && err.contains("cannot write"),
+        "{err}"
+    );
+    let trials = dir.join("trials.csv");
+    let extra = ["--first-frame", "0", "--frames", "8", "--trials", "2", "--trials-csv", path_str(&trials)];
+    let args: Vec<&str> = quality.iter().copied().chain(extra).collect();
+    let out = mrsmap(&args);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let csv = std::fs::read_to_string(&trials).expect("the trials are written");
+    let rows: Vec<&str> = csv.lines().collect();
+    assert_eq!(rows[0], "frame,stamp,quality,free_space,associations,error_mm,error_deg,failed");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let tracked: usize = stdout
+        .split("reference: the ")
+        .nth(1)
+        .and_then(|rest| rest.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .expect("the reference's frames are printed");
+    assert!(tracked >= 3, "{stdout}");
+    assert_eq!(rows.len() - 1, 2 * tracked, "two registrations per tracked frame: {csv}");
+    assert!(rows[1..].iter().all(|r| r.split(',').count() == 8), "{csv}");
+}

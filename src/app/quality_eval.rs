@@ -58,6 +58,12 @@ pub struct QualityJob {
 /// One perturbed registration.
 #[derive(Debug, Clone, Copy)]
 pub struct Trial {
+    /// The frame's index in the dataset and its depth stamp (ns).
+    pub frame: (usize, u64),
+    /// Surfel associations of the final registration (0 without a result).
+    pub associations: usize,
+    /// Angle of the result from the truth (degrees; infinite without a result).
+    pub error_deg: f64,
     /// Quality reported (0 when the registration failed outright).
     pub quality: f64,
     /// The free-space fraction reported (0 when not measured).
@@ -130,7 +136,7 @@ pub fn run(config: &TrackerConfig, job: &QualityJob) -> Result<(Reference, Vec<T
         let frame = pool.install(|| loader.load(entry))?;
         track_frame(&mut tracker, &pool, &frame, &mut out, Workers::Spin);
         if let Some(g) = g.filter(|_| out.estimates[0].is_fresh()) {
-            estimates.push((entry.clone(), out.estimates[0].camera_from_object.inverse()));
+            estimates.push((job.first_frame + index, entry.clone(), out.estimates[0].camera_from_object.inverse()));
             truths.push(g);
         }
     }
@@ -140,7 +146,7 @@ pub fn run(config: &TrackerConfig, job: &QualityJob) -> Result<(Reference, Vec<T
     // Whole poses, not positions alone: over a short or straight stretch the camera
     // centres leave the rotation about their line free, and the truth's orientation
     // would be off by degrees.
-    let tracked: Vec<Pose> = estimates.iter().map(|e| e.1).collect();
+    let tracked: Vec<Pose> = estimates.iter().map(|e| e.2).collect();
     let world_from_object = align_poses(&tracked, &truths, ALIGNMENT_LEVER_M);
     let (mm, deg): (Vec<f64>, Vec<f64>) =
         tracked.iter().zip(&truths).map(|(e, g)| error(e, &(world_from_object.inverse() * g))).unzip();
@@ -149,7 +155,7 @@ pub fn run(config: &TrackerConfig, job: &QualityJob) -> Result<(Reference, Vec<T
     // Pass 2: registrations from perturbed priors.
     let mut rng = Pcg32::new(job.seed);
     let mut trials = Vec::new();
-    for ((entry, _), g) in estimates.iter().zip(&truths) {
+    for ((index, entry, _), g) in estimates.iter().zip(&truths) {
         let truth = world_from_object.inverse() * g;
         let frame = pool.install(|| loader.load(entry))?;
         for _ in 0..job.trials {
@@ -166,8 +172,16 @@ pub fn run(config: &TrackerConfig, job: &QualityJob) -> Result<(Reference, Vec<T
             let e = &out.estimates[0];
             let (mm, deg) = error(&e.camera_from_object.inverse(), &truth);
             let failed = e.quality <= 0.0 || mm > job.fail_mm || deg > job.fail_deg;
-            let error_mm = if e.quality <= 0.0 { f64::INFINITY } else { mm };
-            trials.push(Trial { quality: e.quality, free_space: e.free_space, error_mm, failed });
+            let (error_mm, error_deg) = if e.quality <= 0.0 { (f64::INFINITY, f64::INFINITY) } else { (mm, deg) };
+            trials.push(Trial {
+                frame: (*index, entry.depth_stamp_ns),
+                associations: if e.quality <= 0.0 { 0 } else { e.associations },
+                error_deg,
+                quality: e.quality,
+                free_space: e.free_space,
+                error_mm,
+                failed,
+            });
         }
     }
     Ok((reference, trials))
@@ -178,6 +192,29 @@ fn error(a: &Pose, b: &Pose) -> (f64, f64) {
         (a.translation.vector - b.translation.vector).norm() * 1e3,
         (a.rotation.inverse() * b.rotation).angle().to_degrees(),
     )
+}
+
+/// The trials as CSV, one row each (a header first): `frame,stamp,quality,free_space,
+/// associations,error_mm,error_deg,failed`, the errors empty without a result.
+pub fn trials_csv(trials: &[Trial]) -> String {
+    use std::fmt::Write as _;
+    let mut csv = String::from("frame,stamp,quality,free_space,associations,error_mm,error_deg,failed\n");
+    let finite = |v: f64, digits: usize| if v.is_finite() { format!("{v:.digits$}") } else { String::new() };
+    for t in trials {
+        let _ = writeln!(
+            csv,
+            "{},{},{:.4},{:.4},{},{},{},{}",
+            t.frame.0,
+            crate::io::tum::format_stamp(t.frame.1),
+            t.quality,
+            t.free_space,
+            t.associations,
+            finite(t.error_mm, 2),
+            finite(t.error_deg, 3),
+            u8::from(t.failed)
+        );
+    }
+    csv
 }
 
 /// How a failure detector did: precision and recall for failures, and the counts.
@@ -273,7 +310,22 @@ mod tests {
     use super::*;
 
     fn trial(quality: f64, free_space: f64, error_mm: f64, failed: bool) -> Trial {
-        Trial { quality, free_space, error_mm, failed }
+        Trial { frame: (0, 0), associations: 0, error_deg: 0.0, quality, free_space, error_mm, failed }
+    }
+
+    #[test]
+    fn trials_are_written_one_row_each() {
+        let mut t = trial(0.8, 0.01, 12.345, false);
+        t.frame = (104, 1_341_841_878_065_890_000);
+        t.associations = 231;
+        t.error_deg = 1.5;
+        let none = Trial { error_mm: f64::INFINITY, error_deg: f64::INFINITY, ..trial(0.0, 0.0, 0.0, true) };
+        let csv = trials_csv(&[t, none]);
+        let lines: Vec<&str> = csv.lines().collect();
+        assert_eq!(lines[0], "frame,stamp,quality,free_space,associations,error_mm,error_deg,failed");
+        assert_eq!(lines[1], "104,1341841878.065890,0.8000,0.0100,231,12.35,1.500,0");
+        assert_eq!(lines[2], "0,0.000000,0.0000,0.0000,0,,,1");
+        assert_eq!(lines.len(), 3);
     }
 
     #[test]

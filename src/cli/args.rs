@@ -368,6 +368,11 @@ pub struct QualityArgs {
     /// Random seed.
     #[arg(long, default_value_t = 3)]
     pub seed: u64,
+    /// Also write every registration to this CSV file (`frame,stamp,quality,free_space,
+    /// associations,error_mm,error_deg,failed`; error_mm empty without a result), to study
+    /// a failure rule of your own.
+    #[arg(long, value_name = "FILE")]
+    pub trials_csv: Option<PathBuf>,
 }
 
 /// Topics of an RGB-D recording.

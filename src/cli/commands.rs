@@ -284,6 +284,9 @@ pub fn eval(command: EvalCommand) -> Result<()> {
                 }
             }
             let config = mrsmap::io::tracker_config::read_tracker_config(&a.config)?;
+            let mut inputs = app::outputs::tracker_inputs(&a.config, &config);
+            inputs.extend(app::outputs::dataset_and_camera(&a.dataset, Some(&a.camera)));
+            app::outputs::check_outputs([("--trials-csv", a.trials_csv.as_deref())], &inputs)?;
             let job = app::quality_eval::QualityJob {
                 dataset: a.dataset,
                 camera: a.camera,
@@ -304,6 +307,10 @@ pub fn eval(command: EvalCommand) -> Result<()> {
                 config.params.min_quality,
                 config.params.max_free_space,
             );
+            if let Some(path) = &a.trials_csv {
+                app::report::write_bytes_or_rescue(path, app::quality_eval::trials_csv(&trials).as_bytes())?;
+                println!("\nevery registration: {}", path.display());
+            }
         }
         EvalCommand::Rpe { gt, est, delta, association, plot } => {
             check_plot(plot.as_deref(), &gt, &est)?;
