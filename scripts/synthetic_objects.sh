@@ -50,9 +50,25 @@ $BIN track --config "$config" --dataset "$OUT/track" --camera $CAMERA --reinitia
   --trajectory "$OUT/tracked.txt" > "$OUT/track.log" 2>&1 || { cat "$OUT/track.log"; exit 1; }
 echo
 echo "held-out path, $frames frames, all objects in one tracker:"
-for o in $objects; do
-  printf '  %-9s on its own: %s\n' "$o" "$(sed -nE "s/^$o: ([0-9]+) frames tracking \(([0-9]+) held\), ([0-9]+) lost.*/\1 frames tracking (\2 held), \3 lost/p" "$OUT/alone.log")"
-done
+# Guards (regressions, not targets; measured 2026-12-02, docs/evaluation.md): frames
+# estimated at least. The banana and Suzanne are never found from the start; the others
+# are found again after a loss because a lost object follows the camera motion the
+# tracked ones measure (`follow_tracked_objects`; without it: 2, 80 and 35 frames).
+while read -r o min_alone; do
+  counts=$(sed -nE "s/^$o: ([0-9]+) frames tracking \(([0-9]+) held\), ([0-9]+) lost.*/\1 \2 \3/p" "$OUT/alone.log")
+  read -r tracking held lost <<< "$counts"
+  printf '  %-9s on its own: estimated %3d of %d frames (%d held, %d lost)\n' "$o" "$((tracking - held))" "$frames" "$held" "$lost"
+  if [ "$((tracking - held))" -lt "$min_alone" ]; then
+    echo "    REGRESSION: guard is >= $min_alone frames estimated on its own"
+    status=1
+  fi
+done <<'TABLE'
+banana   0
+scissors 60
+bottle   190
+cow      200
+monkey   0
+TABLE
 echo "  with a perfect detector after each loss:"
 # Guards (regressions, not targets: measured 2026-12-01 and recorded in docs/evaluation.md):
 # frames estimated at least, ATE median at most (mm; the bottle's turn about its axis

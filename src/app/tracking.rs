@@ -127,6 +127,7 @@ pub fn track_frame(
             out.build_ms[k] = (t1 - t0).as_secs_f32() * 1e3;
             out.register_ms[k] = t1.elapsed().as_secs_f32() * 1e3;
         }
+        tracker.end_frame(frame.stamp_ns);
     };
     match workers {
         Workers::Sleep => pool.install(step),

@@ -27,6 +27,7 @@
 //! lost_after_frames = 3
 //! retry_from_last_pose = true  # a failed frame is registered again from the last pose
 //! search_near_last_pose = true # after a loss, look around the last pose first
+//! follow_tracked_objects = true # objects not seen follow the camera motion the tracked ones measure
 //! lm_max_iterations = 10
 //! newton_iterations = 2
 //! coarsest_level = 4
@@ -189,6 +190,7 @@ struct RawTracker {
     lost_after_frames: Option<u32>,
     retry_from_last_pose: Option<bool>,
     search_near_last_pose: Option<bool>,
+    follow_tracked_objects: Option<bool>,
     lm_max_iterations: Option<usize>,
     newton_iterations: Option<usize>,
     coarsest_level: Option<usize>,
@@ -234,6 +236,7 @@ pub fn parse_tracker_config(text: &str, origin: &Path) -> Result<TrackerConfig, 
     params.lost_after_frames = t.lost_after_frames.unwrap_or(params.lost_after_frames);
     params.retry_from_last_pose = t.retry_from_last_pose.unwrap_or(params.retry_from_last_pose);
     params.search_near_last_pose = t.search_near_last_pose.unwrap_or(params.search_near_last_pose);
+    params.follow_tracked_objects = t.follow_tracked_objects.unwrap_or(params.follow_tracked_objects);
     params.registration.lm_max_iterations = t.lm_max_iterations.unwrap_or(params.registration.lm_max_iterations);
     params.registration.newton_iterations = t.newton_iterations.unwrap_or(params.registration.newton_iterations);
     params.registration.coarsest_level = t.coarsest_level.unwrap_or(params.registration.coarsest_level);
@@ -407,12 +410,13 @@ mod tests {
         }
         let off = GOOD.replace(
             "[camera]",
-            "[tracker]\nmax_free_space = 1.0\nfree_space_margin_m = 0.03\nretry_from_last_pose = false\nsearch_near_last_pose = false\n[camera]",
+            "[tracker]\nmax_free_space = 1.0\nfree_space_margin_m = 0.03\nretry_from_last_pose = false\nsearch_near_last_pose = false\nfollow_tracked_objects = false\n[camera]",
         );
         let params = parse_tracker_config(&off, p).expect("valid").params;
         assert_eq!((params.max_free_space, params.free_space_margin_m), (1.0, 0.03));
         assert!(!params.retry_from_last_pose && TrackerParams::default().retry_from_last_pose);
         assert!(!params.search_near_last_pose && TrackerParams::default().search_near_last_pose);
+        assert!(!params.follow_tracked_objects && TrackerParams::default().follow_tracked_objects);
         let scale = GOOD.replace("[camera]", "[tracker]\ncovariance_scale = 100.0\n[camera]");
         assert_eq!(parse_tracker_config(&scale, p).expect("valid").params.covariance_scale, 100.0);
         let twice = format!("{GOOD}{}", &GOOD[GOOD.find("[[object]]").expect("an object")..]);

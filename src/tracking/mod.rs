@@ -11,11 +11,13 @@
 //!     depth image sees through, free_space.rs); if that fails from a constant-velocity
 //!     prediction, once more from the last pose
 //!   → status (tracking / lost / initialising)
+//! then, after every object: objects not seen follow the camera motion a tracked one
+//! measured (`Tracker::end_frame`)
 //! ```
 //!
 //! No I/O, clock or logging; every buffer is allocated by [`Tracker::new`]. The live
 //! tracker process and offline replays call the same [`Tracker::step`] (or its two
-//! stages, to time them).
+//! stages, to time them, then [`Tracker::end_frame`]).
 
 pub mod extent;
 pub mod free_space;

@@ -174,6 +174,18 @@ pub(crate) struct TrackedObject {
     pub next_hypothesis: usize,
     /// Last estimate (`object_from_camera`).
     pub object_from_camera: Pose,
+    /// The last estimate carried along the camera's motion, measured by another tracked
+    /// object, while this one is not seen (`object_from_camera` of frame
+    /// `carried_stamp_ns`; the last estimate itself when it was not carried).
+    pub carried: Pose,
+    /// The frame `carried` is for.
+    pub carried_stamp_ns: u64,
+    /// The frame of the last good registration, if the object is tracked (where
+    /// `motion` starts).
+    pub good_stamp_ns: Option<u64>,
+    /// Set by a good registration of a tracked object in the frame being processed: the
+    /// frame `motion` starts at, and the registration's associations.
+    pub measured_motion: Option<(u64, usize)>,
     /// Camera motion of the last good frame (`previous_from_current`).
     pub motion: Pose,
     pub tracking: bool,

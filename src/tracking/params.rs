@@ -49,6 +49,12 @@ pub struct TrackerParams {
     /// around its last pose, then around the configured initial pose (off: the
     /// configured ones only).
     pub search_near_last_pose: bool,
+    /// Objects not seen (lost, or held after a bad frame) are taken to stay put relative
+    /// to the objects that are tracked (things on a table): their last pose, and the
+    /// search around it, follow the camera's motion as a tracked object measures it.
+    /// Off: they stay where they were last seen in the camera's frame. One object alone
+    /// is never affected.
+    pub follow_tracked_objects: bool,
     /// Which covariance of the registration is published.
     pub covariance: CovarianceModel,
     /// Multiplies the published covariance (variance units: 100 widens every standard
@@ -136,6 +142,7 @@ impl Default for TrackerParams {
             constant_velocity: true,
             retry_from_last_pose: true,
             search_near_last_pose: true,
+            follow_tracked_objects: true,
             covariance: CovarianceModel::Clustered,
             covariance_scale: 1.0,
         }

@@ -97,6 +97,10 @@ impl Tracker {
                 scratch: MatchScratch::new(capacity.surfels),
                 next_hypothesis: 0,
                 object_from_camera,
+                carried: object_from_camera,
+                carried_stamp_ns: 0,
+                good_stamp_ns: None,
+                measured_motion: None,
                 motion: Pose::identity(),
                 tracking: false,
                 bad_frames: 0,
@@ -157,6 +161,7 @@ impl Tracker {
                 Err(_) => self.invalid_frame(k, frame.stamp_ns),
             };
         }
+        self.end_frame(frame.stamp_ns);
     }
 
     /// Stage 1 for object `k`: predict its pose (constant velocity, or the next
@@ -164,10 +169,13 @@ impl Tracker {
     /// region of interest that the gate keeps (§5.2).
     pub fn build_scene(&mut self, k: usize, frame: &RgbdFrame) -> Result<BuildReport, MapError> {
         let object = &mut self.objects[k];
+        object.measured_motion = None;
         object.prior = if let Some(pose) = object.requested.take() {
             pose
         } else if object.tracking {
-            predict(&object.object_from_camera, &object.motion, self.params.constant_velocity)
+            // After a good frame `carried` is the last pose; after a bad one, the last
+            // pose carried along the camera's motion if another object measured it.
+            predict(&object.carried, &object.motion, self.params.constant_velocity)
         } else {
             object.hypothesis(object.next_hypothesis)
         };
@@ -199,11 +207,53 @@ impl Tracker {
         }
         let p = &self.params;
         let object = &mut self.objects[k];
+        let since = object.good_stamp_ns.filter(|_| object.tracking);
         let status = update_state(object, &attempt.result, attempt.good, p);
         let mut e = estimate(k, frame.stamp_ns, status, object, attempt.result.ok().as_ref(), p);
         e.quality = attempt.quality;
         e.free_space = attempt.free_space;
+        if attempt.good {
+            object.carried = object.object_from_camera;
+            object.carried_stamp_ns = frame.stamp_ns;
+            object.good_stamp_ns = Some(frame.stamp_ns);
+            object.measured_motion = since.map(|since| (since, e.associations));
+        } else if !object.tracking {
+            object.good_stamp_ns = None;
+        }
         e
+    }
+
+    /// Stage 3, after every object's registration of the frame stamped `stamp_ns`: with
+    /// `TrackerParams::follow_tracked_objects`, each object not seen in it follows the
+    /// camera's motion as another object measured it, taken to stay put (its `motion`
+    /// over the frames since the one the carried pose is for; of several, the one with
+    /// the most associations). Its carried pose moves to this frame, and so does the
+    /// search around its last pose when it is lost.
+    pub fn end_frame(&mut self, stamp_ns: u64) {
+        if !self.params.follow_tracked_objects {
+            return;
+        }
+        for k in 0..self.objects.len() {
+            let o = &self.objects[k];
+            if o.good_stamp_ns == Some(stamp_ns) {
+                continue;
+            }
+            let measured = self
+                .objects
+                .iter()
+                .enumerate()
+                .filter(|&(j, _)| j != k)
+                .filter_map(|(j, m)| m.measured_motion.map(|(since, associations)| (since, associations, j, m.motion)))
+                .filter(|&(since, ..)| since == o.carried_stamp_ns)
+                .max_by_key(|&(_, associations, j, _)| (associations, std::cmp::Reverse(j)));
+            let Some((.., previous_from_current)) = measured else { continue };
+            let o = &mut self.objects[k];
+            o.carried *= previous_from_current;
+            o.carried_stamp_ns = stamp_ns;
+            if !o.tracking && !o.near_last.is_empty() {
+                fill_hypotheses(&o.carried.inverse(), &o.search, &mut o.near_last);
+            }
+        }
     }
 
     /// One registration of object `k`'s scene map from its prior, judged by its quality
@@ -256,6 +306,10 @@ impl Tracker {
             object.bad_frames = 0;
             object.motion = Pose::identity();
             object.object_from_camera = object.hypotheses[0];
+            object.carried = object.object_from_camera;
+            object.carried_stamp_ns = 0;
+            object.good_stamp_ns = None;
+            object.measured_motion = None;
         }
     }
 }
@@ -309,8 +363,9 @@ fn update_state(
                 object.tracking = false;
                 object.next_hypothesis = 0;
                 if params.search_near_last_pose {
-                    // Look where the object was last seen first (then where configured).
-                    fill_hypotheses(&object.object_from_camera.inverse(), &object.search, &mut object.near_last);
+                    // Look where the object was last seen first (then where configured),
+                    // carried along the camera's motion if another object measured it.
+                    fill_hypotheses(&object.carried.inverse(), &object.search, &mut object.near_last);
                 }
                 TrackingStatus::Lost
             } else {
