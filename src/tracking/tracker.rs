@@ -249,6 +249,8 @@ impl Tracker {
             let Some((.., previous_from_current)) = measured else { continue };
             let o = &mut self.objects[k];
             o.carried *= previous_from_current;
+            // Composed every frame an object stays unseen, for as long as the robot runs.
+            o.carried.rotation.renormalize_fast();
             o.carried_stamp_ns = stamp_ns;
             if !o.tracking && !o.near_last.is_empty() {
                 fill_hypotheses(&o.carried.inverse(), &o.search, &mut o.near_last);
