@@ -339,26 +339,11 @@ fn a_lost_object_is_looked_for_where_it_was_last_seen() {
 
 /// A table with two groups, each a box and a sphere, left and right of the middle.
 fn two_groups() -> mrsmap::synthetic::Mesh {
-    use mrsmap::synthetic::scene::{ColorField, add_box, add_quad, add_sphere};
+    use mrsmap::synthetic::scene::{ColorField, add_box, add_sphere, add_table_and_back_wall};
     let field = ColorField::new(&mut mrsmap::synthetic::Pcg32::new(7), 12);
     let mut mesh = mrsmap::synthetic::Mesh::default();
     let step = 0.01;
-    add_quad(
-        &mut mesh,
-        Vector3::new(-0.8, 0.5, 0.4),
-        Vector3::new(1.6, 0.0, 0.0),
-        Vector3::new(0.0, 0.0, 1.2),
-        step,
-        &field,
-    );
-    add_quad(
-        &mut mesh,
-        Vector3::new(-0.8, -0.8, 1.6),
-        Vector3::new(1.6, 0.0, 0.0),
-        Vector3::new(0.0, 1.3, 0.0),
-        step,
-        &field,
-    );
+    add_table_and_back_wall(&mut mesh, step, &field);
     for side in [-1.0, 1.0] {
         add_box(&mut mesh, Vector3::new(side * 0.35 - 0.1, 0.3, 0.9), Vector3::new(0.2, 0.2, 0.15), step, &field);
         add_sphere(&mut mesh, Vector3::new(side * 0.15, 0.38, 0.8), 0.12, step, &field);

@@ -172,10 +172,11 @@ pub fn run(config: &TrackerConfig, job: &QualityJob) -> Result<(Reference, Vec<T
             let e = &out.estimates[0];
             let (mm, deg) = error(&e.camera_from_object.inverse(), &truth);
             let failed = e.quality <= 0.0 || mm > job.fail_mm || deg > job.fail_deg;
-            let (error_mm, error_deg) = if e.quality <= 0.0 { (f64::INFINITY, f64::INFINITY) } else { (mm, deg) };
+            let (error_mm, error_deg, associations) =
+                if e.quality <= 0.0 { (f64::INFINITY, f64::INFINITY, 0) } else { (mm, deg, e.associations) };
             trials.push(Trial {
                 frame: (*index, entry.depth_stamp_ns),
-                associations: if e.quality <= 0.0 { 0 } else { e.associations },
+                associations,
                 error_deg,
                 quality: e.quality,
                 free_space: e.free_space,

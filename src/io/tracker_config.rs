@@ -48,7 +48,6 @@ use super::ipc::FrameSize;
 use crate::geometry::Pose;
 use crate::geometry::se3::unit_pose_from_xyzw;
 use crate::tracking::{CovarianceModel, SearchRegion, TrackerParams};
-
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 use thiserror::Error;

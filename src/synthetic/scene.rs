@@ -138,6 +138,20 @@ pub fn add_sphere(mesh: &mut Mesh, center: Vector3<f64>, radius: f64, step: f64,
     }
 }
 
+/// Appends the table top of [`room`] (y = 0.5, x in ±0.8 m, z 0.4–1.6 m) and its back
+/// wall (z = 1.6).
+pub fn add_table_and_back_wall(mesh: &mut Mesh, step: f64, field: &ColorField) {
+    add_quad(mesh, Vector3::new(-0.8, 0.5, 0.4), Vector3::new(1.6, 0.0, 0.0), Vector3::new(0.0, 0.0, 1.2), step, field);
+    add_quad(
+        mesh,
+        Vector3::new(-0.8, -0.8, 1.6),
+        Vector3::new(1.6, 0.0, 0.0),
+        Vector3::new(0.0, 1.3, 0.0),
+        step,
+        field,
+    );
+}
+
 /// A tabletop corner at manipulation range: a table top 0.5 m below the camera
 /// (y down, as in the camera frame), a back wall at 1.6 m and a side wall, two boxes and
 /// a sphere on the table, all textured from `seed`. The camera at the identity pose
@@ -147,23 +161,8 @@ pub fn room(seed: u64) -> Mesh {
     let field = ColorField::new(&mut rng, 12);
     let mut mesh = Mesh::default();
     let step = 0.01;
-    // Table top (y = 0.5), back wall (z = 1.6), left wall (x = -0.8).
-    add_quad(
-        &mut mesh,
-        Vector3::new(-0.8, 0.5, 0.4),
-        Vector3::new(1.6, 0.0, 0.0),
-        Vector3::new(0.0, 0.0, 1.2),
-        step,
-        &field,
-    );
-    add_quad(
-        &mut mesh,
-        Vector3::new(-0.8, -0.8, 1.6),
-        Vector3::new(1.6, 0.0, 0.0),
-        Vector3::new(0.0, 1.3, 0.0),
-        step,
-        &field,
-    );
+    // Table top and back wall, then the left wall (x = -0.8).
+    add_table_and_back_wall(&mut mesh, step, &field);
     add_quad(
         &mut mesh,
         Vector3::new(-0.8, -0.8, 0.4),

@@ -180,8 +180,8 @@ pub(crate) struct TrackedObject {
     pub carried: Pose,
     /// The frame `carried` is for.
     pub carried_stamp_ns: u64,
-    /// The frame of the last good registration, if the object is tracked (where
-    /// `motion` starts).
+    /// The frame of the last good registration (where `motion` starts while the object
+    /// is tracked).
     pub good_stamp_ns: Option<u64>,
     /// Set by a good registration of a tracked object in the frame being processed: the
     /// frame `motion` starts at, and the registration's associations.

@@ -217,8 +217,6 @@ impl Tracker {
             object.carried_stamp_ns = frame.stamp_ns;
             object.good_stamp_ns = Some(frame.stamp_ns);
             object.measured_motion = since.map(|since| (since, e.associations));
-        } else if !object.tracking {
-            object.good_stamp_ns = None;
         }
         e
     }
