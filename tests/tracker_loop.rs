@@ -1,6 +1,8 @@
 //! The live tracker loop — iceoryx2 in, tracking, iceoryx2 out — allocates nothing per
 //! frame after warm-up, over more than 1000 frames sent by a real camera-driver process,
-//! while a detector sends detections that the tracker takes and applies. (One test in
+//! while a detector sends detections that the tracker takes and applies, and a second
+//! object, configured where nothing is, stays lost: searched for every frame around its
+//! last pose as that pose follows the camera motion the teddy measures. (One test in
 //! this binary: the allocation counter is global.)
 
 mod common;
@@ -24,7 +26,15 @@ const COUNTED: u64 = 1000;
 #[test]
 fn the_live_loop_allocates_nothing_per_frame() {
     let dir = temp_dir("tracker-loop");
-    let config_path = write_tracker_config(&dir, "loop", "");
+    // The second object: the teddy's model half a metre to the left of the teddy, where
+    // the clip shows the table's edge and no teddy.
+    let second = format!(
+        "[[object]]\nname = \"absent\"\nmodel = \"{}\"\n\
+         camera_from_object = [-0.3077, 0.1253, 1.0402, -0.25098, -0.79599, 0.53327, -0.13797]\n",
+        root().join("models/teddy.mrsm").display()
+    );
+    let config_path = dir.join("tracker.toml");
+    std::fs::write(&config_path, tracker_config_text("loop", "") + &second).expect("write config");
     let config = read_tracker_config(&config_path).expect("config");
     let mut tracker = LiveTracker::<RgbdFrameVga>::start(&config).expect("tracker starts");
     let _camera = start_looping_driver(&config.camera_service, "300");
@@ -55,6 +65,7 @@ fn the_live_loop_allocates_nothing_per_frame() {
     };
     let mut counted_frames = 0;
     let mut tracking = 0;
+    let mut absent_tracking = 0;
     let limits = RunLimits { max_frames: Some(WARM_UP + COUNTED), idle_timeout: Some(Duration::from_secs(30)) };
     let summary = tracker
         .run(&limits, &mut |event| {
@@ -62,7 +73,10 @@ fn the_live_loop_allocates_nothing_per_frame() {
                 start_counting();
             } else if event.frames > WARM_UP {
                 counted_frames += 1;
-                tracking += usize::from(event.output.estimates[0].status == mrsmap::tracking::TrackingStatus::Tracking);
+                let is_tracking =
+                    |k: usize| event.output.estimates[k].status == mrsmap::tracking::TrackingStatus::Tracking;
+                tracking += usize::from(is_tracking(0));
+                absent_tracking += usize::from(is_tracking(1));
             }
             if event.frames == WARM_UP + COUNTED {
                 stop_counting();
@@ -75,10 +89,15 @@ fn the_live_loop_allocates_nothing_per_frame() {
     let d = summary.detections;
     println!("{sent} detections sent: {d:?}");
     assert!(d.applied > 0 && d.not_needed > 0 && d.invalid + d.stale + d.unknown_object == 0, "{d:?}");
-    println!("{summary:?}\n{counted_frames} frames counted, {tracking} tracking, {allocations} allocations");
+    println!(
+        "{} frames ({} skipped as stale), stop {:?}\n{counted_frames} frames counted, {tracking} tracking the teddy, {absent_tracking} the absent \
+         object, {allocations} allocations",
+        summary.frames, summary.skipped_frames, summary.stop
+    );
     assert_eq!(summary.stop, StopReason::FrameLimit, "the driver kept sending");
     assert_eq!(counted_frames, COUNTED);
     assert!(tracking > 0, "the teddy was tracked in some frames");
+    assert!(absent_tracking < COUNTED as usize / 10, "the absent object was mostly lost: {absent_tracking}");
     assert_eq!(
         allocations,
         0,
