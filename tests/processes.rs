@@ -56,6 +56,14 @@ fn wait_for(rx: &Receiver<String>, needle: &str, seconds: u64) -> Vec<String> {
     panic!("no line with {needle:?} within {seconds} s; saw {seen:?}");
 }
 
+/// Starts `mrsmap camera` sending the shipped clip on `service`, with `extra` options.
+fn start_clip_driver(service: &str, extra: &[&str]) -> ChildGuard {
+    let (clip, camera_file) = (teddy_clip(), fr3_camera_file());
+    let mut args = vec!["camera", "--dataset", path(&clip), "--camera", path(&camera_file), "--service", service];
+    args.extend_from_slice(extra);
+    start(&args).0
+}
+
 fn signal(child: &Child, name: &str) {
     let ok = Command::new("kill").args([&format!("-{name}"), &child.id().to_string()]).status().expect("kill runs");
     assert!(ok.success());
@@ -100,18 +108,7 @@ fn driver_tracker_and_client_as_processes() {
     let (client, client_err) =
         start(&["poses", "--service", &config.poses_service, "--out", path(&traj), "--count", "8", "--timeout", "30"]);
     wait_for(&client_err, "reading", 30);
-    let (clip, camera_file) = (teddy_clip(), fr3_camera_file());
-    let (camera, _) = start(&[
-        "camera",
-        "--dataset",
-        path(&clip),
-        "--camera",
-        path(&camera_file),
-        "--service",
-        &config.camera_service,
-        "--rate",
-        "10",
-    ]);
+    let camera = start_clip_driver(&config.camera_service, &["--rate", "10"]);
     assert_eq!(finish(camera, 60).0, Some(0), "the driver sends 8 frames and exits");
     let (code, out) = finish(client, 60);
     assert_eq!(code, Some(0), "client: {out}");
@@ -225,26 +222,14 @@ fn bad_frames_are_reported_invalid_and_a_killed_driver_is_survived() {
     assert!(read_pose(&entry, sequence).is_fresh(), "tracking resumes");
     drop(driver);
     // A real driver, killed mid-stream and restarted: the tracker keeps going.
-    let (clip, camera_file) = (teddy_clip(), fr3_camera_file());
-    let camera_args = [
-        "camera",
-        "--dataset",
-        path(&clip),
-        "--camera",
-        path(&camera_file),
-        "--service",
-        &config.camera_service,
-        "--loop",
-        "--rate",
-        "20",
-    ];
-    let (camera, _) = start(&camera_args);
+    let camera_args = ["--loop", "--rate", "20"];
+    let camera = start_clip_driver(&config.camera_service, &camera_args);
     std::thread::sleep(Duration::from_millis(1500));
     signal(&camera.0, "KILL");
     drop(camera);
     let before = entry.get().publish_stamp_ns;
     std::thread::sleep(Duration::from_millis(500));
-    let (camera, _) = start(&camera_args);
+    let camera = start_clip_driver(&config.camera_service, &camera_args);
     std::thread::sleep(Duration::from_millis(1500));
     let after = *entry.get();
     assert!(after.publish_stamp_ns > before, "poses resume after the driver restarts");
