@@ -1,8 +1,9 @@
 //! The live tracker loop — iceoryx2 in, tracking, iceoryx2 out — allocates nothing per
 //! frame after warm-up, over more than 1000 frames sent by a real camera-driver process,
 //! while a detector sends detections that the tracker takes and applies, and a second
-//! object, configured where nothing is, stays lost: searched for every frame around its
-//! last pose as that pose follows the camera motion the teddy measures. (One test in
+//! object, configured where nothing is, is never found: every frame it is registered
+//! from its configured poses in turn, while its carried pose follows the camera motion
+//! the teddy measures (`Tracker::end_frame`). (One test in
 //! this binary: the allocation counter is global.)
 
 mod common;
