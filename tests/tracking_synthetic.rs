@@ -3,78 +3,22 @@
 
 mod common;
 
+use common::scenes::{blank, object_model_in, two_groups};
 use common::*;
 use mrsmap::frame::RgbdFrame;
 use mrsmap::geometry::Pose;
 use mrsmap::geometry::se3::left_increment;
-use mrsmap::map::{MapBuilder, MapCapacity, MapParams, PlacedFrame, SurfelMap};
-use mrsmap::model::RootStats;
-use mrsmap::slam::VolumeShape;
 use mrsmap::synthetic::{RenderTarget, room};
 use mrsmap::tracking::{
-    FreeSpaceProbe, ModelExtent, ObjectModel, PoseEstimate, SearchRegion, Tracker, TrackerParams, TrackingStatus,
+    FreeSpaceProbe, ObjectModel, PoseEstimate, SearchRegion, Tracker, TrackerParams, TrackingStatus,
 };
-use nalgebra::{Matrix3, Translation3, UnitQuaternion, Vector3, Vector6};
+use nalgebra::{Translation3, UnitQuaternion, Vector3, Vector6};
 
 /// The "object": the two boxes and the sphere on the table of `room(5)`, fused from
 /// `views` at their known poses (object frame = the first camera's frame), inside a box
 /// above the table — a model as the mapping tool makes it, from several key views.
 fn object_model(views: &[(&RenderTarget, Pose)]) -> ObjectModel {
     object_model_in(views, Vector3::new(-0.1, 0.24, 0.98), Vector3::new(0.45, 0.25, 0.3), Vector3::zeros())
-}
-
-/// [`object_model`] of what lies in the box of `center` and `half` extents (the first
-/// camera's frame), in an object frame at `origin` (the first camera's frame shifted;
-/// the volume is a box centred there).
-fn object_model_in(
-    views: &[(&RenderTarget, Pose)],
-    center: Vector3<f64>,
-    half: Vector3<f64>,
-    origin: Vector3<f64>,
-) -> ObjectModel {
-    let first_camera_from_object = Pose::from_parts(Translation3::from(origin), UnitQuaternion::identity());
-    let center = center - origin;
-    let views: Vec<(&RenderTarget, Pose)> =
-        views.iter().map(|&(t, p)| (t, first_camera_from_object.inverse() * p)).collect();
-    let cam = views[0].0.camera;
-    let capacity = MapCapacity { nodes: 200_000, surfels: 400_000 };
-    let mut map =
-        SurfelMap::new(MapParams { smooth_view_dirs: true, ..MapParams::default() }, capacity).expect("params");
-    let inside = move |p: &Vector3<f32>| (p.cast::<f64>() - center).iter().zip(half.iter()).all(|(d, h)| d.abs() <= *h);
-    let frames: Vec<RgbdFrame> =
-        views.iter().map(|(t, _)| RgbdFrame::new(0, cam, &t.rgb, &t.depth).expect("frame")).collect();
-    let placed: Vec<PlacedFrame> =
-        frames.iter().zip(&views).map(|(frame, (_, pose))| PlacedFrame { frame, map_from_camera: *pose }).collect();
-    MapBuilder::new(cam.width as usize, cam.height as usize, capacity.surfels)
-        .fuse(&placed, &inside, &mut map)
-        .expect("the objects are in view");
-    let map = map.to_compact();
-    let root = RootStats::of(&map);
-    let [xx, xy, xz, yy, yz, zz] = root.covariance;
-    let (lo, hi) = map
-        .surfels()
-        .iter()
-        .filter(|s| s.usable())
-        .fold((Vector3::repeat(f64::INFINITY), Vector3::repeat(f64::NEG_INFINITY)), |(lo, hi), s| {
-            (lo.inf(&s.mean.cast()), hi.sup(&s.mean.cast()))
-        });
-    // A box volume is centred on the object frame's origin: one that reaches the objects
-    // and stops above the table and before the walls.
-    let reach = center.abs() + half;
-    let extent = ModelExtent::new(
-        Vector3::from(root.mean),
-        Matrix3::new(xx, xy, xz, xy, yy, yz, xz, yz, zz),
-        Some(&VolumeShape::Box { half_extents: [reach.x, reach.y, reach.z] }),
-        (lo, hi),
-    )
-    .expect("extent");
-    ObjectModel {
-        name: "objects".into(),
-        map,
-        extent,
-        initial_camera_from_object: first_camera_from_object,
-        search: SearchRegion { translation_m: 0.03, yaw_rad: 0.1 },
-    }
 }
 
 fn frame(t: &RenderTarget, k: u64) -> RgbdFrame<'_> {
@@ -85,21 +29,6 @@ fn step(tracker: &mut Tracker, t: &RenderTarget, k: u64) -> PoseEstimate {
     let mut out = [PoseEstimate { ..blank() }];
     tracker.step(&frame(t, k), &mut out);
     out[0]
-}
-
-fn blank() -> PoseEstimate {
-    PoseEstimate {
-        stamp_ns: 0,
-        object: 0,
-        status: TrackingStatus::Initialising,
-        camera_from_object: Pose::identity(),
-        covariance_ros: nalgebra::Matrix6::identity(),
-        quality: 0.0,
-        free_space: 0.0,
-        associations: 0,
-        iterations: 0,
-        bad_frames: 0,
-    }
 }
 
 #[test]
@@ -335,20 +264,6 @@ fn a_lost_object_is_looked_for_where_it_was_last_seen() {
     let e = step(&mut tracker, &frames[9], 60);
     let (mm, _) = pose_error(&e.camera_from_object.inverse(), &poses[9]);
     assert!(e.is_fresh() && mm < 2e-3, "{:.2} mm", mm * 1e3);
-}
-
-/// A table with two groups, each a box and a sphere, left and right of the middle.
-fn two_groups() -> mrsmap::synthetic::Mesh {
-    use mrsmap::synthetic::scene::{ColorField, add_box, add_sphere, add_table_and_back_wall};
-    let field = ColorField::new(&mut mrsmap::synthetic::Pcg32::new(7), 12);
-    let mut mesh = mrsmap::synthetic::Mesh::default();
-    let step = 0.01;
-    add_table_and_back_wall(&mut mesh, step, &field);
-    for side in [-1.0, 1.0] {
-        add_box(&mut mesh, Vector3::new(side * 0.35 - 0.1, 0.3, 0.9), Vector3::new(0.2, 0.2, 0.15), step, &field);
-        add_sphere(&mut mesh, Vector3::new(side * 0.15, 0.38, 0.8), 0.12, step, &field);
-    }
-    mesh
 }
 
 /// Objects that stay put relative to each other (`TrackerParams::follow_tracked_objects`):
