@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::scenes::{blank, object_model_in, two_groups};
+use common::scenes::{TwoGroupsRun, blank, object_model_in};
 use common::*;
 use mrsmap::frame::RgbdFrame;
 use mrsmap::geometry::Pose;
@@ -275,40 +275,18 @@ fn a_lost_object_is_looked_for_where_it_was_last_seen() {
 /// 5-10 cm away by then, and is not found.
 #[test]
 fn a_lost_object_follows_the_camera_motion_the_others_measure() {
-    let mesh = two_groups();
-    let cam = vga().halved();
-    let poses: Vec<Pose> =
-        (0..12).map(|k| left_increment(&(Vector6::new(0.0, -0.002, 0.012, 0.0, 0.002, 0.0) * k as f64))).collect();
-    let frames: Vec<RenderTarget> = poses.iter().map(|p| render_frame(&mesh, cam, p)).collect();
-    let views = [(&frames[0], poses[0]), (&frames[11], poses[11])];
-    let (y, z) = ((0.335, 0.155), (0.88, 0.22));
-    let group = |x: f64, name: &str| {
-        let center = Vector3::new(x, y.0, z.0);
-        ObjectModel {
-            name: name.into(),
-            search: SearchRegion { translation_m: 0.0, yaw_rad: 0.0 },
-            ..object_model_in(&views, center, Vector3::new(0.235, y.1, z.1), center)
-        }
-    };
-    let (left, right) = (group(-0.235, "left"), group(0.235, "right"));
-    let hidden = 4..10;
+    let scene = TwoGroupsRun::new();
+    let (cam, poses, frames) = (scene.cam, &scene.poses, &scene.targets);
+    let (left, right) = scene.models(SearchRegion { translation_m: 0.0, yaw_rad: 0.0 });
+    let hidden = TwoGroupsRun::HIDDEN;
     let run = |follow_tracked_objects: bool| {
         let params = TrackerParams { follow_tracked_objects, ..TrackerParams::default() };
         let models = vec![left.clone(), right.clone()];
         let mut tracker = Tracker::new(params, cam.width as usize, cam.height as usize, models).expect("tracker");
         let mut out = [blank(), blank()];
         let mut right_seen = Vec::new();
-        for (k, t) in frames.iter().enumerate() {
-            let mut depth = t.depth.clone();
-            if hidden.contains(&k) {
-                for (i, d) in depth.iter_mut().enumerate() {
-                    // Right of the gap between the groups.
-                    if i % cam.width as usize >= 160 {
-                        *d = 0;
-                    }
-                }
-            }
-            tracker.step(&RgbdFrame::new(k as u64 * 33_000_000, cam, &t.rgb, &depth).expect("frame"), &mut out);
+        for k in 0..frames.len() {
+            tracker.step(&scene.frame(k, k as u64 * 33_000_000), &mut out);
             assert!(out[0].is_fresh(), "frame {k}: the left group stays tracked");
             right_seen.push(out[1]);
         }
@@ -318,7 +296,7 @@ fn a_lost_object_follows_the_camera_motion_the_others_measure() {
     for (name, seen) in [("followed", &followed), ("stayed", &stayed)] {
         let line: Vec<String> = seen
             .iter()
-            .zip(&poses)
+            .zip(poses)
             .map(|(e, p)| {
                 let (mm, deg) = pose_error(&e.camera_from_object, &(p.inverse() * right.initial_camera_from_object));
                 format!("{:?}{} {:.1}mm {deg:.2}deg", e.status, u8::from(e.is_fresh()), mm * 1e3)

@@ -1,13 +1,15 @@
 //! Rendered scenes and object models for the tracking tests.
 
 use mrsmap::frame::RgbdFrame;
-use mrsmap::geometry::Pose;
+use mrsmap::geometry::se3::left_increment;
+use mrsmap::geometry::{CameraModel, Pose};
 use mrsmap::map::{MapBuilder, MapCapacity, MapParams, PlacedFrame, SurfelMap};
 use mrsmap::model::RootStats;
 use mrsmap::slam::VolumeShape;
 use mrsmap::synthetic::RenderTarget;
 use mrsmap::tracking::{ModelExtent, ObjectModel, PoseEstimate, SearchRegion, TrackingStatus};
-use nalgebra::{Matrix3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Matrix3, Translation3, UnitQuaternion, Vector3, Vector6};
+use std::ops::Range;
 
 /// A model as the mapping tool makes it, fused from `views` at their known poses, of
 /// what lies in the box of `center` and `half` extents (the first camera's frame), in
@@ -92,4 +94,67 @@ pub fn two_groups() -> mrsmap::synthetic::Mesh {
         add_sphere(&mut mesh, Vector3::new(side * 0.15, 0.38, 0.8), 0.12, step, &field);
     }
     mesh
+}
+
+/// [`two_groups`] seen at QVGA along 12 frames (2 mm up, 1.2 cm forward and 0.11° about
+/// the vertical per frame), with the right group hidden (no depth right of the gap
+/// between the groups) in the frames [`TwoGroupsRun::HIDDEN`].
+pub struct TwoGroupsRun {
+    pub cam: CameraModel,
+    /// `world_from_camera` of each frame (world = the first camera's frame).
+    pub poses: Vec<Pose>,
+    pub targets: Vec<RenderTarget>,
+    /// The depth images, the right group's pixels cleared in the hidden frames.
+    pub depths: Vec<Vec<u16>>,
+}
+
+impl TwoGroupsRun {
+    /// The frames without the right group.
+    pub const HIDDEN: Range<usize> = 4..10;
+
+    pub fn new() -> Self {
+        let mesh = two_groups();
+        let cam = crate::common::vga().halved();
+        let poses: Vec<Pose> =
+            (0..12).map(|k| left_increment(&(Vector6::new(0.0, -0.002, 0.012, 0.0, 0.002, 0.0) * k as f64))).collect();
+        let targets: Vec<RenderTarget> = poses.iter().map(|p| crate::common::render_frame(&mesh, cam, p)).collect();
+        let depths = targets
+            .iter()
+            .enumerate()
+            .map(|(k, t)| {
+                let mut depth = t.depth.clone();
+                if Self::HIDDEN.contains(&k) {
+                    for (i, d) in depth.iter_mut().enumerate() {
+                        if i % cam.width as usize >= 160 {
+                            *d = 0;
+                        }
+                    }
+                }
+                depth
+            })
+            .collect();
+        TwoGroupsRun { cam, poses, targets, depths }
+    }
+
+    /// The models of the left and the right group, fused from the first and the last
+    /// frame, each in a frame at its centre, with `search` as their search region.
+    pub fn models(&self, search: SearchRegion) -> (ObjectModel, ObjectModel) {
+        let last = self.targets.len() - 1;
+        let views = [(&self.targets[0], self.poses[0]), (&self.targets[last], self.poses[last])];
+        let (y, z) = ((0.335, 0.155), (0.88, 0.22));
+        let group = |x: f64, name: &str| {
+            let center = Vector3::new(x, y.0, z.0);
+            ObjectModel {
+                name: name.into(),
+                search,
+                ..object_model_in(&views, center, Vector3::new(0.235, y.1, z.1), center)
+            }
+        };
+        (group(-0.235, "left"), group(0.235, "right"))
+    }
+
+    /// Frame `k` (the right group hidden in [`Self::HIDDEN`]), stamped `stamp_ns`.
+    pub fn frame(&self, k: usize, stamp_ns: u64) -> RgbdFrame<'_> {
+        RgbdFrame::new(stamp_ns, self.cam, &self.targets[k].rgb, &self.depths[k]).expect("rendered frame")
+    }
 }
