@@ -8,7 +8,9 @@
 - POSES (from `mrsmap replay ... --out POSES --trajectory TRAJ`): every
   geometry_msgs/msg/PoseWithCovarianceStamped and foxglove.PosesInFrame decodes; the poses
   equal the TUM trajectory mrsmap wrote (which holds their inverses); covariances are
-  symmetric positive definite.
+  symmetric positive definite; every /tf transform (tf2_msgs/msg/TFMessage) from the
+  camera's optical frame to the object's frame equals the pose of its frame, and the model
+  (sensor_msgs/msg/PointCloud2 in that frame, once) decodes into coloured points.
 
     python3 scripts/mcap_interop.py DATASET CAMERA.toml RECORDING POSES TRAJ
 """
@@ -99,6 +101,32 @@ def check_poses(poses, trajectory):
         assert (fp.position.x, fp.position.y, fp.position.z) == (p.x, p.y, p.z)
         assert (fp.orientation.x, fp.orientation.w) == (q.x, q.w)
     print(f"poses: {len(ros)} PoseWithCovarianceStamped and {len(fox)} PosesInFrame messages match the trajectory")
+    check_scene(messages, ros)
+
+
+def check_scene(messages, ros):
+    tf = [m for t, s, m in messages if t == "/tf" and s == "tf2_msgs/msg/TFMessage"]
+    assert len(tf) == len(ros), (len(tf), len(ros))
+    for (stamp_ns, pose), m in zip(ros, tf):
+        (t,) = m.transforms
+        assert (t.header.frame_id, t.child_frame_id) == ("camera_color_optical_frame", "mrsmap/teddy")
+        assert t.header.stamp.sec * 10**9 + t.header.stamp.nanosec == stamp_ns
+        p, q = pose.pose.pose.position, pose.pose.pose.orientation
+        tr, rot = t.transform.translation, t.transform.rotation
+        assert (tr.x, tr.y, tr.z, rot.x, rot.y, rot.z, rot.w) == (p.x, p.y, p.z, q.x, q.y, q.z, q.w)
+    (cloud,) = [m for t, s, m in messages if t == "/mrsmap/teddy/model" and s == "sensor_msgs/msg/PointCloud2"]
+    assert cloud.header.frame_id == "mrsmap/teddy" and cloud.height == 1 and not cloud.is_bigendian
+    fields = [(f.name, f.offset, f.datatype, f.count) for f in cloud.fields]
+    assert fields == [("x", 0, 7, 1), ("y", 4, 7, 1), ("z", 8, 7, 1), ("rgb", 12, 7, 1)], fields
+    points = np.frombuffer(bytes(cloud.data), np.dtype([("xyz", "<f4", 3), ("b", "u1"), ("g", "u1"), ("r", "u1"), ("a", "u1")]))
+    assert len(points) == cloud.width > 1000 and cloud.row_step == 16 * cloud.width
+    xyz = points["xyz"].astype(np.float64)
+    assert np.all(np.isfinite(xyz)) and np.all(np.ptp(xyz, axis=0) < 1.0), np.ptp(xyz, axis=0)
+    colour = np.stack([points["r"], points["g"], points["b"]], axis=1).astype(np.float64)
+    assert np.mean(np.ptp(colour, axis=1) > 0) > 0.5 and np.all(points["a"] == 0)
+    extent = np.ptp(xyz, axis=0) * 100
+    print(f"scene: {len(tf)} /tf transforms match the poses; the model cloud holds {len(points)} coloured points "
+          f"({extent[0]:.0f} x {extent[1]:.0f} x {extent[2]:.0f} cm) in frame {cloud.header.frame_id}")
 
 
 if __name__ == "__main__":

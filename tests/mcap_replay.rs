@@ -240,6 +240,66 @@ fn replay_matches_the_dataset_run_and_is_byte_identical_at_any_thread_count() {
     assert_eq!(read(qvga_traj), read(dir.join("dataset_qvga.txt")));
 }
 
+/// Every message of an MCAP file: topic, log time, data.
+fn messages(path: &Path) -> Vec<(String, u64, Vec<u8>)> {
+    let bytes = std::fs::read(path).expect("mcap");
+    mcap::MessageStream::new(&bytes)
+        .expect("mcap")
+        .map(|m| m.expect("message"))
+        .map(|m| (m.channel.topic.clone(), m.log_time, m.data.into_owned()))
+        .collect()
+}
+
+#[test]
+fn the_replay_places_the_model_in_the_object_frame_on_tf() {
+    use mrsmap::io::ros2::{PointCloud2, PoseWithCovarianceStamped, TfMessage, decode};
+    let dir = temp_dir("mcap-tf");
+    let recording = convert_clip(&dir, DepthEncoding::M32);
+    let config = config_with_threads(&dir, 2);
+    let out = dir.join("poses.mcap");
+    replay(&config, &replay_job(&recording, Some(out.clone()), None)).expect("replays");
+    let all = messages(&out);
+    let of = |topic: &'static str| all.iter().filter(move |(t, ..)| t == topic);
+    let poses: Vec<(u64, PoseWithCovarianceStamped)> =
+        of("/mrsmap/teddy/pose").map(|(_, at, d)| (*at, decode(d).expect("pose"))).collect();
+    let tf: Vec<(u64, TfMessage)> = of("/tf").map(|(_, at, d)| (*at, decode(d).expect("tf"))).collect();
+    assert_eq!((poses.len(), tf.len()), (8, 8), "a transform with every published pose");
+    for ((at, pose), (tf_at, tf)) in poses.iter().zip(&tf) {
+        assert_eq!(at, tf_at);
+        let [t] = &tf.transforms[..] else { panic!("one object, one transform: {tf:?}") };
+        assert_eq!(
+            (t.header.frame_id.as_str(), t.child_frame_id.as_str()),
+            ("camera_color_optical_frame", "mrsmap/teddy")
+        );
+        assert_eq!(t.header.stamp, pose.header.stamp);
+        let p = &pose.pose.pose;
+        let r = &t.transform;
+        assert_eq!([r.translation.x, r.translation.y, r.translation.z], [p.position.x, p.position.y, p.position.z]);
+        assert_eq!(r.rotation, p.orientation);
+    }
+    // The model, once, with the first frame, in the object's frame: its finest surfels.
+    let clouds: Vec<(u64, PointCloud2)> =
+        of("/mrsmap/teddy/model").map(|(_, at, d)| (*at, decode(d).expect("cloud"))).collect();
+    let [(at, cloud)] = &clouds[..] else { panic!("one model cloud, {} written", clouds.len()) };
+    assert_eq!(*at, poses[0].0);
+    assert_eq!(cloud.header.frame_id, "mrsmap/teddy");
+    let model = mrsmap::model::load(&config.objects[0].model).expect("model");
+    let leaves = model.map.leaf_surfels();
+    assert!(leaves.len() > 1000, "{} surfels", leaves.len());
+    assert_eq!((cloud.height, cloud.width, cloud.point_step), (1, leaves.len() as u32, 16));
+    assert_eq!(cloud.data.len(), 16 * leaves.len());
+    let names: Vec<(&str, u32, u8)> = cloud.fields.iter().map(|f| (f.name.as_str(), f.offset, f.datatype)).collect();
+    assert_eq!(names, [("x", 0, 7), ("y", 4, 7), ("z", 8, 7), ("rgb", 12, 7)]);
+    for (point, &s) in cloud.data.chunks_exact(16).zip(&leaves) {
+        let f = |i: usize| f32::from_le_bytes(point[4 * i..4 * i + 4].try_into().expect("4 bytes"));
+        let mean = model.map.surfels()[s as usize].mean;
+        assert_eq!([f(0), f(1), f(2)], [mean.x, mean.y, mean.z]);
+        assert_eq!(point[15], 0, "rgb packed as b, g, r, 0");
+    }
+    let grey = cloud.data.chunks_exact(16).filter(|p| p[12] == p[13] && p[13] == p[14]).count();
+    assert!(grey < leaves.len() / 2, "the model's colours: {grey} of {} points grey", leaves.len());
+}
+
 /// The chunks of an MCAP file, from its summary.
 fn chunk_count(path: &Path) -> usize {
     let bytes = std::fs::read(path).expect("recording");

@@ -450,6 +450,10 @@ fn camera_replays_mcap_and_the_tracker_records_what_it_receives() {
         count += 1;
     }
     assert_eq!(count, 8, "one recorded pose per tracked frame");
+    // With them the transforms a viewer places the model by, and the model once.
+    let source = mrsmap::io::mcap_source::McapSource::open(&recorded, &["/tf"]).expect("opens");
+    assert_eq!(source.message_count("/tf"), Some(8), "a transform per tracked frame");
+    assert_eq!(source.message_count("/mrsmap/teddy/model"), Some(1), "the model, once");
 }
 
 #[test]

@@ -21,6 +21,7 @@ use crate::io::mcap_write::{
     DEFAULT_CHUNK_BYTES, DepthEncoding, FrameChannels, McapFile, ObjectPoseRecord, PoseChannels,
 };
 use crate::io::recording::RecordingTopics;
+use crate::map::SurfelMap;
 use anyhow::{Context, Result, anyhow};
 use nalgebra::Matrix6;
 use std::collections::VecDeque;
@@ -106,8 +107,8 @@ impl std::fmt::Debug for Recorder {
 
 impl Recorder {
     /// Creates the file and starts the writer thread; slots hold frames of up to
-    /// `max_pixels` and the poses of `names`.
-    pub fn start(options: &RecordOptions, names: &[String], max_pixels: usize) -> Result<Self> {
+    /// `max_pixels` and the poses of `names`, whose `models` the file holds too.
+    pub fn start(options: &RecordOptions, names: &[String], models: &[&SurfelMap], max_pixels: usize) -> Result<Self> {
         let last = match options.last_seconds {
             None => None,
             Some(s) if s > 0.0 => {
@@ -136,7 +137,7 @@ impl Recorder {
         let starting = || format!("starting the recording {}", partial.display());
         let frames = FrameChannels::add(&mut file, [&t.color, &t.depth, &t.camera_info], DepthEncoding::M32)
             .with_context(starting)?;
-        let poses = PoseChannels::add(&mut file, names).with_context(starting)?;
+        let poses = PoseChannels::add(&mut file, names, models).with_context(starting)?;
         let (free_tx, free) = sync_channel(SLOTS);
         let (full, full_rx) = sync_channel::<Box<Slot>>(SLOTS);
         for _ in 0..SLOTS {

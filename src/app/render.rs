@@ -3,7 +3,7 @@
 
 use crate::geometry::Pose;
 use crate::geometry::color::lab_to_rgb8;
-use crate::map::{NONE, SurfelMap};
+use crate::map::SurfelMap;
 use nalgebra::{Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 
 /// Where the virtual camera is.
@@ -44,19 +44,6 @@ pub struct Picture {
 }
 
 const BACKGROUND: [u8; 3] = [32, 34, 38];
-
-/// Valid surfels with no valid surfel below them in the tree: the finest description
-/// of each region (coarser surfels fill where finer ones do not exist).
-fn leaf_surfels(map: &SurfelMap) -> Vec<u32> {
-    let has_valid =
-        |node: u32| map.nodes()[node as usize].surfels.iter().any(|&s| s != NONE && map.surfels()[s as usize].valid);
-    (0..map.surfels().len() as u32)
-        .filter(|&s| {
-            let surfel = &map.surfels()[s as usize];
-            surfel.valid && map.nodes()[surfel.node as usize].children.iter().all(|&c| c == NONE || !has_valid(c))
-        })
-        .collect()
-}
 
 /// The azimuth (rad, in steps of 15°) from which the most surfel area faces the camera.
 fn most_seen_azimuth(map: &SurfelMap, surfels: &[u32], elevation: f64) -> f64 {
@@ -135,7 +122,7 @@ pub fn render(map: &SurfelMap, view: &View) -> Picture {
     for px in rgb.chunks_exact_mut(3) {
         px.copy_from_slice(&BACKGROUND);
     }
-    let surfels = leaf_surfels(map);
+    let surfels = map.leaf_surfels();
     if surfels.is_empty() {
         return Picture { width: w as u32, height: h as u32, rgb, drawn: 0 };
     }

@@ -18,6 +18,7 @@ use crate::io::mcap_write::{DEFAULT_CHUNK_BYTES, McapFile, ObjectPoseRecord, Pos
 use crate::io::recording::{Damage, RecordingReader, RecordingStats, RecordingTopics};
 use crate::io::tracker_config::TrackerConfig;
 use crate::io::tum::{Trajectory, write_trajectory};
+use crate::map::SurfelMap;
 use crate::tracking::{ObjectModel, Tracker, TrackingStatus};
 use anyhow::{Context, Result, bail};
 use std::path::PathBuf;
@@ -136,7 +137,8 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
     // Written next to the target and renamed when finished, also after an error, so
     // the poses computed before it are kept.
     let partial = out.as_deref().map(crate::io::atomic::partial_path);
-    let mut output = partial.as_deref().map(|p| create_output(p, &names)).transpose()?;
+    let maps: Vec<&SurfelMap> = models.iter().map(|m| &m.map).collect();
+    let mut output = partial.as_deref().map(|p| create_output(p, &names, &maps)).transpose()?;
     let mut state = Replay {
         models,
         rays,
@@ -197,11 +199,16 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
     })
 }
 
-/// The MCAP file of the poses, created at `partial` (renamed when finished).
-fn create_output(partial: &std::path::Path, names: &[String]) -> Result<(McapFile, PoseChannels)> {
+/// The MCAP file of the poses, created at `partial` (renamed when finished), with the
+/// objects' `models`.
+fn create_output(
+    partial: &std::path::Path,
+    names: &[String],
+    models: &[&SurfelMap],
+) -> Result<(McapFile, PoseChannels)> {
     let mut file = McapFile::create(partial, mcap::Compression::Zstd, DEFAULT_CHUNK_BYTES)
         .with_context(|| format!("creating {}", partial.display()))?;
-    let channels = PoseChannels::add(&mut file, names)?;
+    let channels = PoseChannels::add(&mut file, names, models)?;
     Ok((file, channels))
 }
 

@@ -15,6 +15,7 @@ use super::tracking::{StepOutput, Workers, invalid_frame, load_tracker, pose_mes
 use crate::io::ipc::{self, FrameSize, Ipc, IpcError, now_ns};
 use crate::io::tracker_config::TrackerConfig;
 use crate::io::wire::{ObjectPose, RgbdFrameQvga, RgbdFrameVga, WireFrame};
+use crate::map::SurfelMap;
 use crate::tracking::Tracker;
 use anyhow::Result;
 use iceoryx2::node::Node;
@@ -258,7 +259,9 @@ impl<F: WireFrame> LiveTracker<F> {
     /// Records the frames and poses of the run into MCAP (see [`Recorder`]).
     pub fn record(&mut self, options: &RecordOptions) -> Result<()> {
         let pixels = (F::WIDTH * F::HEIGHT) as usize;
-        self.core.recorder = Some(Recorder::start(options, &self.core.names, pixels)?);
+        let tracker = &self.core.tracker;
+        let models: Vec<&SurfelMap> = (0..tracker.len()).map(|k| tracker.model(k)).collect();
+        self.core.recorder = Some(Recorder::start(options, &self.core.names, &models, pixels)?);
         log_line(format_args!("tracker: recording to {}", options.path.display()));
         Ok(())
     }

@@ -1,15 +1,20 @@
 //! Writing MCAP: RGB-D frames as ROS 2 `sensor_msgs/msg/Image` + `CameraInfo`, and
 //! tracked poses as ROS 2 `geometry_msgs/msg/PoseWithCovarianceStamped` (one topic per
-//! object) and Foxglove `foxglove.PosesInFrame` (all objects, for the 3-D panel over the
-//! images). Log and publish times are the frame's stamp, compression runs on the calling
-//! thread, so the same input gives the same bytes.
+//! object), Foxglove `foxglove.PosesInFrame` (all objects, for the 3-D panel over the
+//! images) and `/tf` (`tf2_msgs/msg/TFMessage`: the camera's optical frame to each
+//! object's frame), with each model as a `sensor_msgs/msg/PointCloud2` in its object's
+//! frame, so that a viewer draws the model where the tracker puts it. Log and publish
+//! times are the frame's stamp, compression runs on the calling thread, so the same input
+//! gives the same bytes.
 
 use super::ros2::{
     self, CameraInfo, Header, Image, PoseWithCovariance, PoseWithCovarianceStamped, RegionOfInterest, Time,
 };
-use super::ros2::{Point, Quaternion, RosPose};
+use super::ros2::{Point, PointCloud2, PointField, Quaternion, RosPose, TfMessage, Transform, TransformStamped};
 use crate::frame::RgbdFrame;
 use crate::geometry::Pose;
+use crate::geometry::color::lab_to_rgb8;
+use crate::map::SurfelMap;
 use foxglove::Encode as _;
 use foxglove::messages::{PosesInFrame, Timestamp};
 use mcap::records::MessageHeader;
@@ -42,6 +47,20 @@ const _: () = assert!(2 * MAX_CHUNK_BYTES <= super::mcap_source::MAX_RECORD_BYTE
 pub const CAMERA_FRAME_ID: &str = "camera_color_optical_frame";
 /// The Foxglove topic with every object's pose.
 pub const POSES_TOPIC: &str = "/mrsmap/poses";
+
+/// The ROS 2 transform topic (`tf2_msgs/msg/TFMessage`).
+pub const TF_TOPIC: &str = "/tf";
+
+/// The frame of an object's model, child of [`CAMERA_FRAME_ID`] on [`TF_TOPIC`].
+pub fn object_frame_id(name: &str) -> String {
+    format!("mrsmap/{name}")
+}
+
+/// The topic of an object's model (`PointCloud2` in [`object_frame_id`], written once,
+/// with the first frame).
+pub fn object_model_topic(name: &str) -> String {
+    format!("/mrsmap/{name}/model")
+}
 
 /// The topic of an object's `PoseWithCovarianceStamped`.
 pub fn object_pose_topic(name: &str) -> String {
@@ -239,12 +258,19 @@ pub struct PoseChannels {
     objects: Vec<u16>,
     detections: Vec<u16>,
     poses_in_frame: u16,
+    tf: u16,
+    frame_ids: Vec<String>,
+    /// The models' clouds and their channels, until the first frame is written.
+    models: Vec<(u16, PointCloud2)>,
 }
 
 impl PoseChannels {
     /// Adds a `PoseWithCovarianceStamped` channel per object, a `PoseStamped` channel
-    /// per object for the detections applied to it, and one `PosesInFrame`.
-    pub fn add(file: &mut McapFile, names: &[String]) -> Result<Self, McapError> {
+    /// per object for the detections applied to it, one `PosesInFrame`, `/tf`, and a
+    /// `PointCloud2` channel per object for its model (`models`, in the order of `names`),
+    /// which the first [`PoseChannels::write`] writes.
+    pub fn add(file: &mut McapFile, names: &[String], models: &[&SurfelMap]) -> Result<Self, McapError> {
+        assert_eq!(names.len(), models.len(), "one model per object");
         let schema = ros2::pose_with_covariance_stamped_schema();
         let objects = names
             .iter()
@@ -257,7 +283,20 @@ impl PoseChannels {
             .iter()
             .map(|n| file.add_ros2_channel(&object_detection_topic(n), "geometry_msgs/msg/PoseStamped", &schema))
             .collect::<Result<_, _>>()?;
-        Ok(PoseChannels { objects, detections, poses_in_frame: file.add_poses_in_frame_channel(POSES_TOPIC)? })
+        let poses_in_frame = file.add_poses_in_frame_channel(POSES_TOPIC)?;
+        let tf = file.add_ros2_channel(TF_TOPIC, "tf2_msgs/msg/TFMessage", &ros2::tf_message_schema())?;
+        let frame_ids: Vec<String> = names.iter().map(|n| object_frame_id(n)).collect();
+        let schema = ros2::point_cloud2_schema();
+        let models = names
+            .iter()
+            .zip(models)
+            .zip(&frame_ids)
+            .map(|((n, map), frame_id)| {
+                let channel = file.add_ros2_channel(&object_model_topic(n), "sensor_msgs/msg/PointCloud2", &schema)?;
+                Ok((channel, model_cloud(map, frame_id)))
+            })
+            .collect::<Result<_, McapError>>()?;
+        Ok(PoseChannels { objects, detections, poses_in_frame, tf, frame_ids, models })
     }
 
     /// Writes that `object` was re-initialised at the detected `camera_from_object`
@@ -274,9 +313,20 @@ impl PoseChannels {
         file.write_cdr(self.detections[object], stamp_ns, &message)
     }
 
-    /// Writes the poses of the objects tracked in the frame stamped `stamp_ns`.
-    pub fn write(&self, file: &mut McapFile, stamp_ns: u64, poses: &[ObjectPoseRecord<'_>]) -> Result<(), McapError> {
+    /// Writes the poses of the objects tracked in the frame stamped `stamp_ns` (and, with
+    /// the first frame, the models).
+    pub fn write(
+        &mut self,
+        file: &mut McapFile,
+        stamp_ns: u64,
+        poses: &[ObjectPoseRecord<'_>],
+    ) -> Result<(), McapError> {
+        for (channel, mut cloud) in std::mem::take(&mut self.models) {
+            cloud.header.stamp = Time::from_ns(stamp_ns);
+            file.write_cdr(channel, stamp_ns, &cloud)?;
+        }
         let header = Header { stamp: Time::from_ns(stamp_ns), frame_id: CAMERA_FRAME_ID.into() };
+        let mut tf = TfMessage { transforms: Vec::with_capacity(poses.len()) };
         let mut all = PosesInFrame {
             timestamp: Some(Timestamp::new((stamp_ns / 1_000_000_000) as u32, (stamp_ns % 1_000_000_000) as u32)),
             frame_id: CAMERA_FRAME_ID.into(),
@@ -293,6 +343,14 @@ impl PoseChannels {
             let message =
                 PoseWithCovarianceStamped { header: header.clone(), pose: PoseWithCovariance { pose, covariance } };
             file.write_cdr(self.objects[p.object], stamp_ns, &message)?;
+            tf.transforms.push(TransformStamped {
+                header: header.clone(),
+                child_frame_id: self.frame_ids[p.object].clone(),
+                transform: Transform {
+                    translation: ros2::Vector3 { x: pose.position.x, y: pose.position.y, z: pose.position.z },
+                    rotation: pose.orientation,
+                },
+            });
             all.poses.push(foxglove::messages::Pose {
                 position: Some(foxglove::messages::Vector3 {
                     x: pose.position.x,
@@ -307,7 +365,40 @@ impl PoseChannels {
                 }),
             });
         }
+        if !tf.transforms.is_empty() {
+            file.write_cdr(self.tf, stamp_ns, &tf)?;
+        }
         file.write(self.poses_in_frame, stamp_ns, &all.encode_to_vec())
+    }
+}
+
+/// A model as a point cloud in its object's frame `frame_id`: the finest valid surfel of
+/// every region ([`SurfelMap::leaf_surfels`]) at its mean, in its colour (fields `x`, `y`,
+/// `z` and `rgb`, float32, `rgb` packed as PCL packs it: bytes b, g, r, 0). Stamped 0.
+pub fn model_cloud(map: &SurfelMap, frame_id: &str) -> PointCloud2 {
+    const POINT_BYTES: u32 = 16;
+    let surfels = map.leaf_surfels();
+    let mut data = Vec::with_capacity(surfels.len() * POINT_BYTES as usize);
+    for &s in &surfels {
+        let surfel = &map.surfels()[s as usize];
+        for v in [surfel.mean.x, surfel.mean.y, surfel.mean.z] {
+            data.extend_from_slice(&v.to_le_bytes());
+        }
+        let [r, g, b] = lab_to_rgb8([surfel.color.x, surfel.color.y, surfel.color.z]);
+        data.extend_from_slice(&[b, g, r, 0]);
+    }
+    let field =
+        |name: &str, offset| PointField { name: name.into(), offset, datatype: ros2::POINT_FIELD_FLOAT32, count: 1 };
+    PointCloud2 {
+        header: Header { stamp: Time::from_ns(0), frame_id: frame_id.into() },
+        height: 1,
+        width: surfels.len() as u32,
+        fields: vec![field("x", 0), field("y", 4), field("z", 8), field("rgb", 12)],
+        is_bigendian: false,
+        point_step: POINT_BYTES,
+        row_step: POINT_BYTES * surfels.len() as u32,
+        data,
+        is_dense: true,
     }
 }
 

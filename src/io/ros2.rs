@@ -169,6 +169,84 @@ pub struct PoseStamped {
     pub pose: RosPose,
 }
 
+/// `geometry_msgs/Vector3`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Vector3 {
+    /// x.
+    pub x: f64,
+    /// y.
+    pub y: f64,
+    /// z.
+    pub z: f64,
+}
+
+/// `geometry_msgs/Transform`: the child frame's pose in the parent frame.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Transform {
+    /// Translation.
+    pub translation: Vector3,
+    /// Rotation.
+    pub rotation: Quaternion,
+}
+
+/// `geometry_msgs/TransformStamped` (`header.frame_id` is the parent frame).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TransformStamped {
+    /// Header.
+    pub header: Header,
+    /// The child frame.
+    pub child_frame_id: String,
+    /// `parent_from_child`.
+    pub transform: Transform,
+}
+
+/// `tf2_msgs/TFMessage`, the message of the `/tf` topic.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TfMessage {
+    /// Transforms.
+    pub transforms: Vec<TransformStamped>,
+}
+
+/// `sensor_msgs/PointField`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PointField {
+    /// Name (`x`, `y`, `z`, `rgb`, …).
+    pub name: String,
+    /// Byte offset in a point.
+    pub offset: u32,
+    /// Type (`FLOAT32` = 7).
+    pub datatype: u8,
+    /// Elements.
+    pub count: u32,
+}
+
+/// `PointField.FLOAT32`.
+pub const POINT_FIELD_FLOAT32: u8 = 7;
+
+/// `sensor_msgs/PointCloud2`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PointCloud2 {
+    /// Header.
+    pub header: Header,
+    /// Rows (1: unordered).
+    pub height: u32,
+    /// Points per row.
+    pub width: u32,
+    /// The fields of a point.
+    pub fields: Vec<PointField>,
+    /// Multi-byte fields are big-endian.
+    pub is_bigendian: bool,
+    /// Bytes per point.
+    pub point_step: u32,
+    /// Bytes per row.
+    pub row_step: u32,
+    /// The points.
+    #[serde(with = "serde_bytes")]
+    pub data: Vec<u8>,
+    /// No invalid points.
+    pub is_dense: bool,
+}
+
 const TIME: &str = "MSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n";
 const HEADER: &str = "MSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n";
 const SEPARATOR: &str = "================================================================================\n";
@@ -198,6 +276,20 @@ pub fn pose_with_covariance_stamped_schema() -> String {
 pub fn pose_stamped_schema() -> String {
     format!(
         "std_msgs/Header header\ngeometry_msgs/Pose pose\n{SEPARATOR}{HEADER}{SEPARATOR}{TIME}{SEPARATOR}MSG: geometry_msgs/Pose\ngeometry_msgs/Point position\ngeometry_msgs/Quaternion orientation\n{SEPARATOR}MSG: geometry_msgs/Point\nfloat64 x\nfloat64 y\nfloat64 z\n{SEPARATOR}MSG: geometry_msgs/Quaternion\nfloat64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n"
+    )
+}
+
+/// The `ros2msg` schema of `tf2_msgs/msg/TFMessage`.
+pub fn tf_message_schema() -> String {
+    format!(
+        "geometry_msgs/TransformStamped[] transforms\n{SEPARATOR}MSG: geometry_msgs/TransformStamped\nstd_msgs/Header header\nstring child_frame_id\ngeometry_msgs/Transform transform\n{SEPARATOR}{HEADER}{SEPARATOR}{TIME}{SEPARATOR}MSG: geometry_msgs/Transform\ngeometry_msgs/Vector3 translation\ngeometry_msgs/Quaternion rotation\n{SEPARATOR}MSG: geometry_msgs/Vector3\nfloat64 x\nfloat64 y\nfloat64 z\n{SEPARATOR}MSG: geometry_msgs/Quaternion\nfloat64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n"
+    )
+}
+
+/// The `ros2msg` schema of `sensor_msgs/msg/PointCloud2`.
+pub fn point_cloud2_schema() -> String {
+    format!(
+        "std_msgs/Header header\nuint32 height\nuint32 width\nsensor_msgs/PointField[] fields\nbool is_bigendian\nuint32 point_step\nuint32 row_step\nuint8[] data\nbool is_dense\n{SEPARATOR}{HEADER}{SEPARATOR}{TIME}{SEPARATOR}MSG: sensor_msgs/PointField\nuint8 INT8=1\nuint8 UINT8=2\nuint8 INT16=3\nuint8 UINT16=4\nuint8 INT32=5\nuint8 UINT32=6\nuint8 FLOAT32=7\nuint8 FLOAT64=8\nstring name\nuint32 offset\nuint8 datatype\nuint32 count\n"
     )
 }
 

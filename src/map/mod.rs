@@ -283,6 +283,21 @@ impl SurfelMap {
         }
     }
 
+    /// The valid surfels with no valid surfel below them in the tree: the finest
+    /// description of each region (coarser surfels fill where finer ones do not exist).
+    /// For pictures and exports of a map; allocates.
+    pub fn leaf_surfels(&self) -> Vec<u32> {
+        let has_valid = |node: u32| {
+            self.nodes()[node as usize].surfels.iter().any(|&s| s != NONE && self.surfels[s as usize].valid)
+        };
+        (0..self.surfels.len() as u32)
+            .filter(|&s| {
+                let surfel = &self.surfels[s as usize];
+                surfel.valid && self.nodes()[surfel.node as usize].children.iter().all(|&c| c == NONE || !has_valid(c))
+            })
+            .collect()
+    }
+
     /// Number of usable surfels (valid and not excluded) per level, finest first.
     pub fn usable_surfels_per_level(&self) -> [usize; MAX_LEVELS] {
         let mut out = [0; MAX_LEVELS];
