@@ -590,6 +590,7 @@ fn offline_tracking_every_nth_frame() {
         start_at_ground_truth: false,
         detector: None,
         trajectory: None,
+        overlay: None,
         stop: Default::default(),
     };
     let err = mrsmap::app::track_dataset::run(&config, &job).expect_err("every 0 is refused");

@@ -141,6 +141,7 @@ fn track_dataset_stopped_early_writes_the_frames_tracked() {
         start_at_ground_truth: false,
         detector: None,
         trajectory: Some(dir.join("track.txt")),
+        overlay: None,
         stop: Stop::after_frames(3),
     };
     let s = mrsmap::app::track_dataset::run(&config, &job).expect("an interrupted run is not an error");

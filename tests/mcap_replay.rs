@@ -346,6 +346,7 @@ fn job_template(dir: &Path) -> mrsmap::app::track_dataset::TrackDatasetJob {
         start_at_ground_truth: false,
         detector: None,
         trajectory: Some(dir.join("dataset.txt")),
+        overlay: None,
         stop: Default::default(),
     }
 }

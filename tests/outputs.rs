@@ -172,3 +172,42 @@ fn outputs_go_through_links_into_files_and_into_devices_as_they_are() {
     assert!(err.contains("--out /dev/null") && err.contains("not a regular file"), "{err}");
     assert!(!std::fs::metadata("/dev/null").expect("exists").is_file(), "/dev/null is still a device");
 }
+
+#[test]
+fn track_dataset_draws_each_tracked_frame_with_its_model() {
+    let dir = temp_dir("overlay");
+    let config = write_tracker_config(&dir, "overlay", "");
+    let (clip, camera) = (teddy_clip(), fr3_camera_file());
+    let pictures = dir.join("pictures");
+    let args = ["track", "--config", path_str(&config), "--dataset", path_str(&clip), "--camera", path_str(&camera)];
+    let out = Command::new(mrsmap_bin())
+        .args(args)
+        .args(["--max-frames", "3", "--start-at-ground-truth", "--overlay", path_str(&pictures)])
+        .output()
+        .expect("binary runs");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}{}", String::from_utf8_lossy(&out.stderr));
+    assert!(stdout.contains("3 frames tracking") && stdout.contains("3 pictures written"), "{stdout}");
+    let mut names: Vec<String> = std::fs::read_dir(&pictures)
+        .expect("the folder")
+        .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    let depth_stamps: Vec<String> = std::fs::read_to_string(clip.join("associations.txt"))
+        .expect("associations")
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .take(3)
+        .map(|l| format!("{}.overlay.png", l.split_whitespace().nth(2).expect("depth stamp")))
+        .collect();
+    assert_eq!(names, depth_stamps, "one picture per frame, named by its depth stamp");
+    let mut reader = mrsmap::io::image::PngReader::default();
+    let mut rgb = Vec::new();
+    reader.read_rgb8(&pictures.join(&names[0]), (640, 480), &mut rgb).expect("a VGA picture");
+    let count = |c: [u8; 3]| rgb.chunks_exact(3).filter(|p| *p == c).count();
+    let (green, red) = (count([40, 220, 60]), count([235, 40, 40]));
+    // Tracked: a green frame, and the model drawn mostly where the depth agrees with it.
+    assert_eq!(&rgb[..3], &[40, 220, 60]);
+    let border = 2 * 4 * (640 + 480) - 4 * 16;
+    assert!(green > border + 2000 && red < (green - border) / 10, "{green} green, {red} red pixels");
+}

@@ -16,6 +16,7 @@ pub mod mapper;
 pub mod model_cmd;
 pub mod odometry;
 pub mod outputs;
+pub mod overlay;
 pub mod plot;
 pub mod pose_files;
 pub mod poses_client;

@@ -4,19 +4,22 @@
 use super::accuracy::{ObjectAccuracy, Published};
 use super::dataset::thread_pool;
 use super::interrupt::{Interrupted, Stop};
+use super::overlay::{ModelPoints, draw};
 use super::poses_client::{object_trajectory_header, object_trajectory_path};
 use super::report::{both_written, percentile, progress_bar, write_or_rescue};
 use super::tracking::{LoadedTracker, StepOutput, Workers, invalid_frame, load_tracker, track_frame};
+use crate::frame::RgbdFrame;
 use crate::geometry::Pose;
 use crate::io::camera_file::read_camera;
 use crate::io::frames::FrameLoader;
+use crate::io::image::write_rgb8;
 use crate::io::tracker_config::TrackerConfig;
 use crate::io::tum::{TumDataset, format_stamp, write_trajectory};
 use crate::synthetic::Pcg32;
 use crate::tracking::TrackingStatus;
 use anyhow::{Context, Result, bail};
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// What to run.
 #[derive(Debug, Clone)]
@@ -41,6 +44,8 @@ pub struct TrackDatasetJob {
     pub detector: Option<SimulatedDetector>,
     /// Write each object's `object_from_camera` trajectory here.
     pub trajectory: Option<PathBuf>,
+    /// Write a picture of each tracked frame into this folder ([`super::overlay`]).
+    pub overlay: Option<PathBuf>,
     /// Stops the run before its next frame; the frames tracked so far are written.
     pub stop: Stop,
 }
@@ -157,6 +162,7 @@ pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<TrackDataset
             tracker.reinitialise(k, &(world_from_camera.inverse() * w));
         }
     }
+    let mut overlay = job.overlay.as_deref().map(|dir| Overlays::new(dir, &tracker)).transpose()?;
     let mut out = StepOutput::new(tracker.len());
     let mut results: Vec<ObjectResult> =
         tracker.names().iter().map(|n| ObjectResult { name: n.clone(), ..Default::default() }).collect();
@@ -176,7 +182,12 @@ pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<TrackDataset
             reinitialise_lost(&mut tracker, &out, &detection, &world_from_model, &mut rng, &mut results);
         }
         match pool.install(|| loader.load(entry)) {
-            Ok(frame) => track_frame(&mut tracker, &pool, &frame, &mut out, Workers::Spin),
+            Ok(frame) => {
+                track_frame(&mut tracker, &pool, &frame, &mut out, Workers::Spin);
+                if let Some(o) = &mut overlay {
+                    o.write(&frame, &out, config.params.free_space_margin_m, &bar);
+                }
+            }
             Err(e) => {
                 bar.suspend(|| eprintln!("warning: frame {}: {e}", format_stamp(entry.depth_stamp_ns)));
                 invalid_frame(&tracker, entry.depth_stamp_ns, &mut out);
@@ -195,6 +206,9 @@ pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<TrackDataset
         }
     }
     bar.finish_and_clear();
+    if let Some(o) = &overlay {
+        o.report();
+    }
     // Every object's trajectory is tried, whatever became of the others.
     let mut written = Ok(());
     for (k, r) in results.iter_mut().enumerate() {
@@ -212,6 +226,50 @@ pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<TrackDataset
     written?;
     let detector = job.detector.map(|d| d.describe());
     Ok(TrackDatasetSummary { objects: results, interrupted, covariance: config.params.covariance, detector })
+}
+
+/// The pictures of `--overlay`: one per tracked frame. A picture that cannot be written
+/// is reported and the run goes on without pictures (its trajectories are what counts).
+struct Overlays {
+    dir: PathBuf,
+    models: Vec<ModelPoints>,
+    rgb: Vec<u8>,
+    written: usize,
+    failed: bool,
+}
+
+impl Overlays {
+    fn new(dir: &Path, tracker: &crate::tracking::Tracker) -> Result<Self> {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("--overlay {}: cannot create the folder", dir.display()))?;
+        let models = (0..tracker.len()).map(|k| ModelPoints::new(tracker.model(k))).collect();
+        Ok(Overlays { dir: dir.to_path_buf(), models, rgb: Vec::new(), written: 0, failed: false })
+    }
+
+    fn write(&mut self, frame: &RgbdFrame, out: &StepOutput, margin_m: f64, bar: &indicatif::ProgressBar) {
+        if self.failed {
+            return;
+        }
+        let objects: Vec<(&ModelPoints, Option<Pose>)> = (self.models.iter())
+            .zip(&out.estimates)
+            .map(|(m, e)| (m, e.is_fresh().then_some(e.camera_from_object)))
+            .collect();
+        draw(frame, &objects, margin_m, &mut self.rgb);
+        // Not `<stamp>.png`, the name of a TUM dataset's own images: a folder of the
+        // dataset given as --overlay keeps them.
+        let path = self.dir.join(format!("{}.overlay.png", format_stamp(frame.stamp_ns)));
+        match write_rgb8(&path, frame.camera.width, frame.camera.height, &self.rgb) {
+            Ok(()) => self.written += 1,
+            Err(e) => {
+                bar.suspend(|| eprintln!("warning: --overlay: {e}; no more pictures are written, tracking goes on"));
+                self.failed = true;
+            }
+        }
+    }
+
+    fn report(&self) {
+        println!("{} pictures written to {}", self.written, self.dir.display());
+    }
 }
 
 /// What the simulated detector sees: the camera's ground-truth pose in the frame it

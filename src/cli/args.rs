@@ -181,6 +181,14 @@ pub struct TrackArgs {
     /// Offline: write object_from_camera per object (TUM format).
     #[arg(long, requires = "dataset")]
     pub trajectory: Option<PathBuf>,
+    /// Offline: into this folder (created if missing), a picture per tracked frame
+    /// (<depth stamp>.overlay.png, replacing one of an earlier run): the colour image with each tracked model drawn at its
+    /// estimated pose, green where the depth image agrees with the model, red where the
+    /// camera sees through it (a wrong pose), blue where something nearer hides it, grey
+    /// without depth; a green frame around it when every object is tracked, red when one
+    /// is not. About 0.5 MB a VGA frame: pick frames with --first-frame, --max-frames, --every.
+    #[arg(long, requires = "dataset", value_name = "DIR")]
+    pub overlay: Option<PathBuf>,
 }
 
 #[derive(Subcommand)]
@@ -410,7 +418,9 @@ pub struct ReplayArgs {
     #[arg(long)]
     pub config: PathBuf,
     /// Poses to write (MCAP): geometry_msgs/msg/PoseWithCovarianceStamped on
-    /// /mrsmap/<object>/pose and foxglove.PosesInFrame on /mrsmap/poses.
+    /// /mrsmap/<object>/pose, foxglove.PosesInFrame on /mrsmap/poses, the transforms to
+    /// each object's frame mrsmap/<object> on /tf, and each model as a PointCloud2 in its
+    /// frame on /mrsmap/<object>/model (open it with the recording in Foxglove).
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Replace --out if it exists.

@@ -76,6 +76,7 @@ pub fn track(a: TrackArgs) -> Result<ExitCode> {
             start_at_ground_truth: a.start_at_ground_truth || a.reinitialise_at_ground_truth,
             detector,
             trajectory: a.trajectory,
+            overlay: a.overlay,
             stop: Stop::on_signals()?,
         };
         let summary = app::track_dataset::run(&config, &job)?;

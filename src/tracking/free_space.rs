@@ -31,7 +31,7 @@ pub const FREE_SPACE_LEVEL: usize = 1;
 /// A surfel counts as facing the camera when the cosine between its normal and the ray
 /// back to the camera exceeds this (within about 73°): at grazing angles a small error
 /// of the pose moves the projected pixel onto the background.
-const MIN_FACING_COS: f32 = 0.3;
+pub const MIN_FACING_COS: f32 = 0.3;
 
 /// Below this many supported and violated surfels together (the object is mostly
 /// occluded, out of view or without depth) the check abstains.
@@ -120,18 +120,43 @@ impl FreeSpaceProbe {
             if !(u >= 0.0 && v >= 0.0 && u < width && v < height) {
                 continue;
             }
-            let raw = frame.depth[v as usize * frame.width() + u as usize];
-            if raw == 0 {
-                continue;
-            }
-            let measured = f32::from(raw) * scale;
-            if measured > p.z + margin {
-                out.violated += 1;
-            } else if measured >= p.z - margin {
-                out.supported += 1;
+            match evidence(frame.depth[v as usize * frame.width() + u as usize], scale, p.z, margin) {
+                Evidence::Violated => out.violated += 1,
+                Evidence::Supported => out.supported += 1,
+                Evidence::Occluded | Evidence::NoMeasurement => {}
             }
         }
         out
+    }
+}
+
+/// What a depth measurement says about a model surface point.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Evidence {
+    /// No depth at its pixel.
+    NoMeasurement,
+    /// The measurement lies within the margin of the point's depth.
+    Supported,
+    /// The measurement lies beyond it: the camera sees through the point.
+    Violated,
+    /// The measurement lies nearer: something occludes it (no evidence either way).
+    Occluded,
+}
+
+/// The evidence of the raw depth value `raw` (metres per unit `scale`) for a point at
+/// depth `z` (m), with the tolerance `margin` (m).
+#[inline(always)]
+pub fn evidence(raw: u16, scale: f32, z: f32, margin: f32) -> Evidence {
+    if raw == 0 {
+        return Evidence::NoMeasurement;
+    }
+    let measured = f32::from(raw) * scale;
+    if measured > z + margin {
+        Evidence::Violated
+    } else if measured >= z - margin {
+        Evidence::Supported
+    } else {
+        Evidence::Occluded
     }
 }
 
