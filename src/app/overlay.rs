@@ -9,7 +9,7 @@
 use crate::frame::RgbdFrame;
 use crate::geometry::Pose;
 use crate::map::SurfelMap;
-use crate::tracking::free_space::{Evidence, MIN_FACING_COS, evidence};
+use crate::tracking::free_space::{DepthTest, Evidence};
 use nalgebra::{Point3, Vector3};
 
 const SUPPORTED: [u8; 3] = [40, 220, 60];
@@ -51,24 +51,15 @@ pub fn draw(frame: &RgbdFrame, objects: &[(&ModelPoints, Option<Pose>)], margin_
     rgb.extend(frame.rgb.iter().map(|&c| (f32::from(c) * DIM) as u8));
     let camera = &frame.camera;
     let (w, h) = (frame.width(), frame.height());
-    let (scale, margin) = (camera.depth_scale_m as f32, margin_m as f32);
     // Far surfaces first, so that nearer ones are drawn over them.
     let mut discs: Vec<(f32, f64, f64, f64, [u8; 3])> = Vec::new();
     for (model, pose) in objects {
         let Some(camera_from_object) = pose else { continue };
-        let rotation = camera_from_object.rotation.to_rotation_matrix().into_inner().cast::<f32>();
-        let translation = camera_from_object.translation.vector.cast::<f32>();
+        let test = DepthTest::new(frame, camera_from_object, margin_m);
+        let project = |p: &Vector3<f32>| camera.project(&Point3::from(p.cast::<f64>()));
         for (mean, normal, size) in &model.points {
-            let p = rotation * mean + translation;
-            if p.z <= 0.0 || -(rotation * normal).dot(&p) <= MIN_FACING_COS * p.norm() {
-                continue;
-            }
-            let Some((u, v)) = camera.project(&Point3::from(p.cast::<f64>())) else { continue };
-            let (ui, vi) = (u.round(), v.round());
-            if !(ui >= 0.0 && vi >= 0.0 && ui < w as f64 && vi < h as f64) {
-                continue;
-            }
-            let colour = match evidence(frame.depth[vi as usize * w + ui as usize], scale, p.z, margin) {
+            let Some((p, (u, v), evidence)) = test.judge(frame, mean, normal, project) else { continue };
+            let colour = match evidence {
                 Evidence::Supported => SUPPORTED,
                 Evidence::Violated => VIOLATED,
                 Evidence::Occluded => OCCLUDED,

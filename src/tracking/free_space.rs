@@ -22,7 +22,7 @@
 use crate::frame::RgbdFrame;
 use crate::geometry::Pose;
 use crate::map::SurfelMap;
-use nalgebra::{Point3, Vector3};
+use nalgebra::{Matrix3, Point3, Vector3};
 
 /// The model level whose surfels are projected (clamped to the model's levels): 2.5 cm
 /// cells at the default finest resolution of 1.25 cm, about 3 000 surfels for the teddy.
@@ -31,7 +31,7 @@ pub const FREE_SPACE_LEVEL: usize = 1;
 /// A surfel counts as facing the camera when the cosine between its normal and the ray
 /// back to the camera exceeds this (within about 73°): at grazing angles a small error
 /// of the pose moves the projected pixel onto the background.
-pub const MIN_FACING_COS: f32 = 0.3;
+const MIN_FACING_COS: f32 = 0.3;
 
 /// Below this many supported and violated surfels together (the object is mostly
 /// occluded, out of view or without depth) the check abstains.
@@ -103,30 +103,70 @@ impl FreeSpaceProbe {
         margin_m: f64,
         project: impl Fn(&Vector3<f32>) -> Option<(f64, f64)>,
     ) -> FreeSpace {
-        let rotation = camera_from_object.rotation.to_rotation_matrix().into_inner().cast::<f32>();
-        let translation = camera_from_object.translation.vector.cast::<f32>();
-        let (width, height) = (frame.camera.width as f64, frame.camera.height as f64);
-        let (scale, margin) = (frame.camera.depth_scale_m as f32, margin_m as f32);
+        let test = DepthTest::new(frame, camera_from_object, margin_m);
         let mut out = FreeSpace::default();
         for (mean, normal) in &self.points {
-            let p = rotation * mean + translation;
-            // In front of the camera, the normal facing it: n · (0 − p) > cos · |p|.
-            if p.z <= 0.0 || -(rotation * normal).dot(&p) <= MIN_FACING_COS * p.norm() {
-                continue;
-            }
-            let Some((u, v)) = project(&p) else { continue };
-            let (u, v) = (u.round(), v.round());
-            // Also rejects NaN.
-            if !(u >= 0.0 && v >= 0.0 && u < width && v < height) {
-                continue;
-            }
-            match evidence(frame.depth[v as usize * frame.width() + u as usize], scale, p.z, margin) {
-                Evidence::Violated => out.violated += 1,
-                Evidence::Supported => out.supported += 1,
-                Evidence::Occluded | Evidence::NoMeasurement => {}
+            match test.judge(frame, mean, normal, &project) {
+                Some((_, _, Evidence::Violated)) => out.violated += 1,
+                Some((_, _, Evidence::Supported)) => out.supported += 1,
+                _ => {}
             }
         }
         out
+    }
+}
+
+/// The comparison of model surface points with the depth image at one pose (the check's,
+/// also drawn by `track --dataset --overlay`).
+#[derive(Debug, Clone, Copy)]
+pub struct DepthTest {
+    rotation: Matrix3<f32>,
+    translation: Vector3<f32>,
+    /// Image size (pixels).
+    size: (f64, f64),
+    /// Metres per depth unit.
+    scale: f32,
+    /// The depth tolerance (m).
+    margin: f32,
+}
+
+impl DepthTest {
+    /// The test of `frame`'s depth at `camera_from_object`, `margin_m` the tolerance.
+    pub fn new(frame: &RgbdFrame, camera_from_object: &Pose, margin_m: f64) -> Self {
+        DepthTest {
+            rotation: camera_from_object.rotation.to_rotation_matrix().into_inner().cast::<f32>(),
+            translation: camera_from_object.translation.vector.cast::<f32>(),
+            size: (frame.camera.width as f64, frame.camera.height as f64),
+            scale: frame.camera.depth_scale_m as f32,
+            margin: margin_m as f32,
+        }
+    }
+
+    /// The model surface point `mean` with `normal` (object frame) in the camera frame,
+    /// its pixel (`project` maps camera-frame points in front of the camera to pixels,
+    /// unrounded) and what the depth measured there says; `None` where it is behind the
+    /// camera, does not face it or falls outside the image.
+    #[inline(always)]
+    pub fn judge(
+        &self,
+        frame: &RgbdFrame,
+        mean: &Vector3<f32>,
+        normal: &Vector3<f32>,
+        project: impl Fn(&Vector3<f32>) -> Option<(f64, f64)>,
+    ) -> Option<(Vector3<f32>, (f64, f64), Evidence)> {
+        let p = self.rotation * mean + self.translation;
+        // In front of the camera, the normal facing it: n · (0 − p) > cos · |p|.
+        if p.z <= 0.0 || -(self.rotation * normal).dot(&p) <= MIN_FACING_COS * p.norm() {
+            return None;
+        }
+        let pixel = project(&p)?;
+        let (u, v) = (pixel.0.round(), pixel.1.round());
+        // Also rejects NaN.
+        if !(u >= 0.0 && v >= 0.0 && u < self.size.0 && v < self.size.1) {
+            return None;
+        }
+        let raw = frame.depth[v as usize * frame.width() + u as usize];
+        Some((p, pixel, evidence(raw, self.scale, p.z, self.margin)))
     }
 }
 
@@ -146,7 +186,7 @@ pub enum Evidence {
 /// The evidence of the raw depth value `raw` (metres per unit `scale`) for a point at
 /// depth `z` (m), with the tolerance `margin` (m).
 #[inline(always)]
-pub fn evidence(raw: u16, scale: f32, z: f32, margin: f32) -> Evidence {
+fn evidence(raw: u16, scale: f32, z: f32, margin: f32) -> Evidence {
     if raw == 0 {
         return Evidence::NoMeasurement;
     }
