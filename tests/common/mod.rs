@@ -205,3 +205,13 @@ pub fn reseal(bytes: &mut [u8]) {
     }
     bytes[n..].copy_from_slice(&(!crc).to_le_bytes());
 }
+
+/// Runs the `mrsmap` binary with `args` and collects its output.
+pub fn mrsmap(args: &[&str]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_mrsmap")).args(args).output().expect("binary runs")
+}
+
+/// A path as the `&str` a command line takes.
+pub fn path_str(p: &Path) -> &str {
+    p.to_str().expect("utf-8 path")
+}

@@ -1,0 +1,205 @@
+//! The tracking, bench and quality commands end to end on the shipped clip.
+
+mod common;
+
+use common::*;
+use mrsmap::app::track_dataset::TrackDatasetJob;
+use mrsmap::io::tracker_config::read_tracker_config;
+use mrsmap::io::tum::{TumDataset, format_stamp};
+use std::process::Command;
+
+#[test]
+fn the_readme_demo_runs_two_processes_and_tracks_every_frame() {
+    let out = Command::new(env!("CARGO_BIN_EXE_mrsmap"))
+        .args(["demo", "--rate", "20"])
+        .current_dir(root())
+        .output()
+        .expect("demo runs");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}\n{}", String::from_utf8_lossy(&out.stderr));
+    assert!(text.contains("8 poses received, 8 tracking") && text.contains("error vs motion capture"), "{text}");
+}
+
+#[test]
+fn bench_runs_on_the_shipped_clip_with_or_without_the_pose_graph() {
+    let clip = teddy_clip();
+    let camera = fr3_camera_file();
+    for graph in ["0", "2"] {
+        let args = [
+            "bench",
+            "--dataset",
+            path_str(&clip),
+            "--camera",
+            path_str(&camera),
+            "--passes",
+            "1",
+            "--resolution",
+            "qvga",
+        ];
+        let out = mrsmap(&[&args[..], &["--graph-key-views", graph]].concat());
+        assert!(out.status.success(), "--graph-key-views {graph}: {}", String::from_utf8_lossy(&out.stderr));
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(text.starts_with("machine: "), "the figures say which machine ran them: {text}");
+        assert!(text.contains("\ncompiled for: "), "the figures say what they were built for: {text}");
+        assert!(text.contains("QVGA 320×240"), "{text}");
+        assert_eq!(text.contains("pose-graph step"), graph != "0", "{text}");
+    }
+}
+
+#[test]
+fn bench_times_tracking_with_the_start_up_frame_apart() {
+    let (clip, camera, config) = (teddy_clip(), fr3_camera_file(), root().join("robot_config/tracker.toml"));
+    let args = ["bench", "--dataset", path_str(&clip), "--camera", path_str(&camera), "--passes", "1"];
+    let more = ["--resolution", "qvga", "--graph-key-views", "0", "--tracking-first-frame", "0"];
+    let out = mrsmap(&[&args[..], &more[..], &["--tracking-config", path_str(&config)]].concat());
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("| per frame median / p99 (ms) | scene map / registration median (ms) | first frame (ms) |"),
+        "{text}"
+    );
+    // Eight frames: the first after start-up apart, seven in the median and p99.
+    let row = text.lines().find(|l| l.starts_with("| QVGA 320×240 |") && l.split('|').count() == 8);
+    let cells: Vec<&str> = row.unwrap_or_else(|| panic!("no tracking row: {text}")).split('|').map(str::trim).collect();
+    assert_eq!(cells[3], "7", "{text}");
+    let ms = |cell: &str| -> Vec<f64> { cell.split(" / ").map(|v| v.parse().expect("a number")).collect() };
+    assert!(ms(cells[4]).iter().chain(&ms(cells[5])).all(|&t| t > 0.0), "{text}");
+    assert!(cells[6].parse::<f64>().is_ok_and(|ms| ms > 0.0), "{text}");
+}
+
+#[test]
+fn offline_tracking_every_nth_frame() {
+    let dir = temp_dir("every");
+    let traj = dir.join("traj.txt");
+    let (clip, camera, config) = (teddy_clip(), fr3_camera_file(), root().join("robot_config/tracker.toml"));
+    let args = ["track", "--config", path_str(&config), "--dataset", path_str(&clip), "--camera", path_str(&camera)];
+    let out = mrsmap(&[&args[..], &["--every", "3", "--qvga", "--trajectory", path_str(&traj)]].concat());
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("3 frames tracking"), "frames 0, 3 and 6 of 8: {text}");
+    // The published covariances against the ground truth: per frame, and per change
+    // between consecutive tracked frames (here 3 frames apart).
+    for what in ["(3 frames, unaligned)", "(2 changes of the error between consecutive frames)"] {
+        assert!(text.contains(&format!("covariance (clustered) vs ground truth {what}: the errors are")), "{text}");
+    }
+    let stamps: Vec<String> = std::fs::read_to_string(&traj)
+        .expect("trajectory")
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .map(|l| l.split(' ').next().unwrap_or_default().to_string())
+        .collect();
+    let frames = TumDataset::open(&clip).expect("clip").frames;
+    let depth: Vec<String> = [0, 3, 6].iter().map(|&i| format_stamp(frames[i].depth_stamp_ns)).collect();
+    assert_eq!(stamps, depth, "depth stamps of the tracked frames");
+    let out = mrsmap(&[&args[..], &["--every", "0"]].concat());
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--every"), "names the option");
+    // The library job refuses it too (as replay's), rather than reading it as 1.
+    let config = read_tracker_config(&config).expect("config");
+    let job = TrackDatasetJob {
+        dataset: clip,
+        camera,
+        first_frame: 0,
+        every: 0,
+        max_frames: None,
+        qvga: true,
+        start_at_ground_truth: false,
+        detector: None,
+        trajectory: None,
+        overlay: None,
+        stop: Default::default(),
+    };
+    let err = mrsmap::app::track_dataset::run(&config, &job).expect_err("every 0 is refused");
+    assert!(err.to_string().contains("--every"), "{err}");
+}
+
+#[test]
+fn outputs_that_fail_at_the_end_of_a_run_are_rescued_not_lost() {
+    // A full disk at the end of a run, made reproducible: the temporary file each output
+    // is written through is a link to /dev/full, where every write fails with ENOSPC.
+    let dir = temp_dir("cli-rescue");
+    let (clip, camera) = (teddy_clip(), fr3_camera_file());
+    let (traj, timings) = (dir.join("odo.txt"), dir.join("timings.csv"));
+    for p in [&traj, &timings] {
+        let partial = std::path::PathBuf::from(format!("{}.partial", p.display()));
+        let _ = std::fs::remove_file(&partial);
+        std::os::unix::fs::symlink("/dev/full", &partial).expect("symlink");
+    }
+    let args = ["odometry", "--dataset", path_str(&clip), "--camera", path_str(&camera), "--out", path_str(&traj)];
+    let out = mrsmap(&[&args[..], &["--timings", path_str(&timings)]].concat());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    // Both outputs are tried and both rescued; the cause is said once.
+    let rescued = |name: &str| std::env::temp_dir().join(format!("mrsmap-rescued-{}-{name}", out_pid(&err, name)));
+    let (rescued_traj, rescued_timings) = (rescued("odo.txt"), rescued("timings.csv"));
+    assert!(err.contains(&format!("written to {} instead", rescued_traj.display())), "{err}");
+    assert!(err.contains(&format!("\nand could not write {}", timings.display())), "{err}");
+    assert_eq!(err.matches("No space left on device").count(), 1, "{err}");
+    // The rescued trajectory is the one a good disk gets, and nothing is left behind.
+    let good = dir.join("good.txt");
+    assert!(
+        mrsmap(&["odometry", "--dataset", path_str(&clip), "--camera", path_str(&camera), "--out", path_str(&good)])
+            .status
+            .success()
+    );
+    assert_eq!(std::fs::read(&rescued_traj).expect("rescued"), std::fs::read(&good).expect("good"));
+    assert!(std::fs::read_to_string(&rescued_timings).expect("rescued").starts_with("stamp,build_ms"));
+    assert!(!traj.exists() && !timings.exists());
+    for p in [rescued_traj, rescued_timings] {
+        let _ = std::fs::remove_file(p);
+    }
+}
+
+/// The process id in a rescued file's name as the error gives it.
+fn out_pid(err: &str, name: &str) -> String {
+    let tail = format!("-{name} instead");
+    let end = err.find(&tail).expect("a rescued file");
+    let start = err[..end].rfind("mrsmap-rescued-").expect("its prefix") + "mrsmap-rescued-".len();
+    err[start..end].to_string()
+}
+
+/// `eval tracking-quality --trials-csv` writes every registration, one row each, for a
+/// rule of one's own.
+#[test]
+fn the_quality_measurement_writes_every_registration() {
+    let dir = temp_dir("cli-trials-csv");
+    let config = root().join("robot_config/tracker.toml");
+    let clip = root().join("tests/data/fr3_teddy_8");
+    let camera = root().join("robot_config/cameras/tum_fr3.toml");
+    let quality = [
+        "eval",
+        "tracking-quality",
+        "--config",
+        path_str(&config),
+        "--dataset",
+        path_str(&clip),
+        "--camera",
+        path_str(&camera),
+    ];
+    // A file that cannot be written is refused before the run.
+    let lost = ["--trials-csv", "/no/such/folder/trials.csv"];
+    let out = mrsmap(&quality.iter().copied().chain(lost).collect::<Vec<_>>());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.code() == Some(1) && err.starts_with("error: --trials-csv ") && err.contains("cannot write"),
+        "{err}"
+    );
+    let trials = dir.join("trials.csv");
+    let extra = ["--first-frame", "0", "--frames", "8", "--trials", "2", "--trials-csv", path_str(&trials)];
+    let args: Vec<&str> = quality.iter().copied().chain(extra).collect();
+    let out = mrsmap(&args);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let csv = std::fs::read_to_string(&trials).expect("the trials are written");
+    let rows: Vec<&str> = csv.lines().collect();
+    assert_eq!(rows[0], "frame,stamp,quality,free_space,associations,error_mm,error_deg,failed");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let tracked: usize = stdout
+        .split("reference: the ")
+        .nth(1)
+        .and_then(|rest| rest.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .expect("the reference's frames are printed");
+    assert!(tracked >= 3, "{stdout}");
+    assert_eq!(rows.len() - 1, 2 * tracked, "two registrations per tracked frame: {csv}");
+    assert!(rows[1..].iter().all(|r| r.split(',').count() == 8), "{csv}");
+}
