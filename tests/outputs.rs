@@ -8,20 +8,16 @@ use common::*;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-fn path_str(p: &Path) -> &str {
-    p.to_str().expect("utf-8 path")
-}
-
 /// Runs `mrsmap` and returns its exit code and standard error.
-fn mrsmap(args: &[&str]) -> (Option<i32>, String) {
-    let out = Command::new(mrsmap_bin()).args(args).output().expect("binary runs");
+fn code_and_stderr(args: &[&str]) -> (Option<i32>, String) {
+    let out = mrsmap(args);
     (out.status.code(), String::from_utf8_lossy(&out.stderr).into_owned())
 }
 
 /// Asserts that the command failed before writing anything, with a message naming
 /// `flag`, `path` and what the file is, and that `path` still holds `before`.
 fn assert_refused(args: &[&str], flag: &str, path: &Path, what: &str, before: &[u8]) {
-    let (code, err) = mrsmap(args);
+    let (code, err) = code_and_stderr(args);
     assert_eq!(code, Some(1), "{args:?}: {err}");
     let said = format!("{flag} {} is {what}, which this run reads", path.display());
     assert!(err.contains(&said), "{args:?}: expected `{said}` in: {err}");
@@ -72,8 +68,17 @@ fn a_dataset_s_files_are_never_an_output() {
     assert_refused(&args, "--out", &camera_copy, "the camera file", &camera_before);
     // Two outputs in one file.
     let traj = clip.join("traj.txt");
-    let (code, err) =
-        mrsmap(&["odometry", "--dataset", d, "--camera", c, "--out", path_str(&traj), "--timings", path_str(&traj)]);
+    let (code, err) = code_and_stderr(&[
+        "odometry",
+        "--dataset",
+        d,
+        "--camera",
+        c,
+        "--out",
+        path_str(&traj),
+        "--timings",
+        path_str(&traj),
+    ]);
     assert_eq!(code, Some(1), "{err}");
     assert!(err.contains("--out and --timings name the same file"), "{err}");
     assert!(!traj.exists(), "nothing was written");
@@ -84,7 +89,7 @@ fn a_recording_a_model_and_a_configuration_are_never_an_output() {
     let dir = temp_dir("outputs-replay");
     let (model, config) = model_and_config(&dir, "outputs");
     let rec = dir.join("rec.mcap");
-    let (code, err) = mrsmap(&["convert", "tum-to-mcap", path_str(&teddy_clip()), "--out", path_str(&rec)]);
+    let (code, err) = code_and_stderr(&["convert", "tum-to-mcap", path_str(&teddy_clip()), "--out", path_str(&rec)]);
     assert_eq!(code, Some(0), "{err}");
     let rec_before = std::fs::read(&rec).expect("reads");
     let model_before = std::fs::read(&model).expect("reads");
@@ -98,8 +103,17 @@ fn a_recording_a_model_and_a_configuration_are_never_an_output() {
     assert_refused(&args, "--trajectory", &model, "the model of 'teddy'", &model_before);
     let args = ["replay", "--input", r, "--config", cfg, "--out", path_str(&config), "--force"];
     assert_refused(&args, "--out", &config, "the tracker configuration", &config_before);
-    let (code, err) =
-        mrsmap(&["replay", "--input", r, "--config", cfg, "--out", path_str(&poses), "--trajectory", path_str(&poses)]);
+    let (code, err) = code_and_stderr(&[
+        "replay",
+        "--input",
+        r,
+        "--config",
+        cfg,
+        "--out",
+        path_str(&poses),
+        "--trajectory",
+        path_str(&poses),
+    ]);
     assert_eq!(code, Some(1), "{err}");
     assert!(err.contains("--out and --trajectory name the same file"), "{err}");
     // The tracker over a dataset, and recording a live run.
@@ -112,14 +126,15 @@ fn a_recording_a_model_and_a_configuration_are_never_an_output() {
     // A recording of an earlier live run is replaced only with --force.
     let earlier = dir.join("earlier.mcap");
     std::fs::copy(&rec, &earlier).expect("copy");
-    let (code, err) = mrsmap(&["track", "--config", cfg, "--record", path_str(&earlier), "--idle-timeout", "1"]);
+    let (code, err) =
+        code_and_stderr(&["track", "--config", cfg, "--record", path_str(&earlier), "--idle-timeout", "1"]);
     assert_eq!(code, Some(1), "{err}");
     assert!(err.contains(&format!("{} exists; pass --force to replace it", earlier.display())), "{err}");
     assert_eq!(std::fs::read(&earlier).expect("still there"), rec_before);
     // So is what a crash left of one (`NAME.partial`).
     let (fresh, crashed) = (dir.join("fresh.mcap"), dir.join("fresh.mcap.partial"));
     std::fs::copy(&rec, &crashed).expect("copy");
-    let (code, err) = mrsmap(&["track", "--config", cfg, "--record", path_str(&fresh), "--idle-timeout", "1"]);
+    let (code, err) = code_and_stderr(&["track", "--config", cfg, "--record", path_str(&fresh), "--idle-timeout", "1"]);
     assert_eq!(code, Some(1), "{err}");
     assert!(err.contains(&format!("{} exists: a recording that a crash left", crashed.display())), "{err}");
     assert_eq!(std::fs::read(&crashed).expect("still there"), rec_before);
@@ -149,25 +164,24 @@ fn outputs_go_through_links_into_files_and_into_devices_as_they_are() {
     std::os::unix::fs::symlink(&file, &link).expect("a symbolic link");
     let (clip, camera) = (teddy_clip(), fr3_camera_file());
     let (d, c) = (path_str(&clip), path_str(&camera));
-    let (code, err) = mrsmap(&["odometry", "--dataset", d, "--camera", c, "--out", path_str(&link)]);
+    let (code, err) = code_and_stderr(&["odometry", "--dataset", d, "--camera", c, "--out", path_str(&link)]);
     assert_eq!(code, Some(0), "{err}");
     assert!(std::fs::symlink_metadata(&link).expect("exists").file_type().is_symlink(), "the link stays a link");
     let written = std::fs::read_to_string(&file).expect("reads");
     assert!(written.starts_with("# mrsmap odometry") && written.lines().count() > 8, "{written}");
     // Standard output: the trajectory, and a picture, piped on.
-    let run = |args: &[&str]| Command::new(mrsmap_bin()).args(args).output().expect("binary runs");
-    let out = run(&["odometry", "--dataset", d, "--camera", c, "--out", "/dev/stdout"]);
+    let out = mrsmap(&["odometry", "--dataset", d, "--camera", c, "--out", "/dev/stdout"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let text = String::from_utf8_lossy(&out.stdout);
     let poses = text.lines().filter(|l| l.split(' ').filter(|v| v.parse::<f64>().is_ok()).count() == 8).count();
     assert!(text.contains("# mrsmap odometry") && poses == 8, "{text}");
     let model = root().join("models/teddy.mrsm");
-    let out = run(&["model", "render", path_str(&model), "--out", "/dev/stdout"]);
+    let out = mrsmap(&["model", "render", path_str(&model), "--out", "/dev/stdout"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     assert!(out.stdout.starts_with(b"\x89PNG\r\n\x1a\n"), "a PNG on standard output");
     assert!(std::fs::symlink_metadata("/dev/stdout").expect("exists").file_type().is_symlink());
     // A recording cannot go to a device.
-    let (code, err) = mrsmap(&["convert", "tum-to-mcap", d, "--out", "/dev/null", "--force"]);
+    let (code, err) = code_and_stderr(&["convert", "tum-to-mcap", d, "--out", "/dev/null", "--force"]);
     assert_eq!(code, Some(1), "{err}");
     assert!(err.contains("--out /dev/null") && err.contains("not a regular file"), "{err}");
     assert!(!std::fs::metadata("/dev/null").expect("exists").is_file(), "/dev/null is still a device");

@@ -13,7 +13,6 @@ use mrsmap::io::tracker_config::read_tracker_config;
 use mrsmap::io::tum::{Trajectory, TumDataset};
 use mrsmap::io::wire::{FrameHeader, ObjectDetection, ObjectPose, RgbdFrameVga, detection_mode, status, write_frame};
 use std::io::{BufRead, BufReader};
-use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::sync::mpsc::{Receiver, channel};
 use std::time::Duration;
@@ -59,7 +58,8 @@ fn wait_for(rx: &Receiver<String>, needle: &str, seconds: u64) -> Vec<String> {
 /// Starts `mrsmap camera` sending the shipped clip on `service`, with `extra` options.
 fn start_clip_driver(service: &str, extra: &[&str]) -> ChildGuard {
     let (clip, camera_file) = (teddy_clip(), fr3_camera_file());
-    let mut args = vec!["camera", "--dataset", path(&clip), "--camera", path(&camera_file), "--service", service];
+    let mut args =
+        vec!["camera", "--dataset", path_str(&clip), "--camera", path_str(&camera_file), "--service", service];
     args.extend_from_slice(extra);
     start(&args).0
 }
@@ -85,17 +85,13 @@ fn finish(mut guard: ChildGuard, seconds: u64) -> (Option<i32>, String) {
     }
 }
 
-fn path(p: &Path) -> &str {
-    p.to_str().expect("utf-8 path")
-}
-
 #[test]
 fn driver_tracker_and_client_as_processes() {
     let dir = temp_dir("processes");
     let config_path = write_tracker_config(&dir, "e2e", "");
     let config = read_tracker_config(&config_path).expect("config");
     let traj = dir.join("poses.txt");
-    let (tracker, tracker_err) = start(&["track", "--config", path(&config_path)]);
+    let (tracker, tracker_err) = start(&["track", "--config", path_str(&config_path)]);
     // The start-up line says where the tracker listens and publishes.
     let ready = wait_for(&tracker_err, "ready", 60);
     let ports = format!("frames from {}/rgbd/vga, poses on {}", config.camera_service, config.poses_service);
@@ -105,8 +101,17 @@ fn driver_tracker_and_client_as_processes() {
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     let placement = mrsmap::app::affinity::plan(threads, mrsmap::app::affinity::allowed_cpus()).to_string();
     assert!(ready.last().is_some_and(|l| l.contains(&placement)), "{placement:?} in {ready:?}");
-    let (client, client_err) =
-        start(&["poses", "--service", &config.poses_service, "--out", path(&traj), "--count", "8", "--timeout", "30"]);
+    let (client, client_err) = start(&[
+        "poses",
+        "--service",
+        &config.poses_service,
+        "--out",
+        path_str(&traj),
+        "--count",
+        "8",
+        "--timeout",
+        "30",
+    ]);
     wait_for(&client_err, "reading", 30);
     let camera = start_clip_driver(&config.camera_service, &["--rate", "10"]);
     assert_eq!(finish(camera, 60).0, Some(0), "the driver sends 8 frames and exits");
@@ -187,11 +192,12 @@ fn bad_frames_are_reported_invalid_and_a_killed_driver_is_survived() {
     let dir = temp_dir("faults");
     let config_path = write_tracker_config(&dir, "faults", "");
     let config = read_tracker_config(&config_path).expect("config");
-    let (tracker, tracker_err) = start(&["track", "--config", path(&config_path)]);
+    let (tracker, tracker_err) = start(&["track", "--config", path_str(&config_path)]);
     wait_for(&tracker_err, "ready", 60);
     // A client writing the poses, killed below: what it received is on disk.
     let kept = dir.join("kept.txt");
-    let (client, client_err) = start(&["poses", "--service", &config.poses_service, "--out", path(&kept), "--quiet"]);
+    let (client, client_err) =
+        start(&["poses", "--service", &config.poses_service, "--out", path_str(&kept), "--quiet"]);
     wait_for(&client_err, "reading", 30);
     let driver = TestDriver::new(&config.camera_service);
     let node = ipc::node("test_reader").expect("node");
@@ -244,7 +250,7 @@ fn bad_frames_are_reported_invalid_and_a_killed_driver_is_survived() {
     let held_line = format!("# {} held", mrsmap::io::tum::format_stamp(held.frame_stamp_ns));
     assert!(text.contains(&held_line), "{held_line} in {text}");
     let again = Command::new(mrsmap_bin())
-        .args(["poses", "--service", &config.poses_service, "--out", path(&kept), "--timeout", "1"])
+        .args(["poses", "--service", &config.poses_service, "--out", path_str(&kept), "--timeout", "1"])
         .output()
         .expect("runs");
     let err = String::from_utf8_lossy(&again.stderr);
@@ -287,7 +293,7 @@ fn a_detection_finds_an_object_the_tracker_could_not() {
     std::fs::write(&config_path, text).expect("write config");
     let config = read_tracker_config(&config_path).expect("config");
     let recorded = dir.join("recorded.mcap");
-    let (tracker, tracker_err) = start(&["track", "--config", path(&config_path), "--record", path(&recorded)]);
+    let (tracker, tracker_err) = start(&["track", "--config", path_str(&config_path), "--record", path_str(&recorded)]);
     wait_for(&tracker_err, "ready", 60);
     let driver = TestDriver::new(&config.camera_service);
     let node = ipc::node("test_detector").expect("node");
@@ -353,7 +359,7 @@ fn a_detection_finds_an_object_the_tracker_could_not() {
     // The replay of the recording: the detection applied before the same frame, so the
     // same frames tracked as live.
     let replayed = Command::new(mrsmap_bin())
-        .args(["replay", "--input", path(&recorded), "--config", path(&config_path)])
+        .args(["replay", "--input", path_str(&recorded), "--config", path_str(&config_path)])
         .output()
         .expect("replay runs");
     let stdout = String::from_utf8_lossy(&replayed.stdout);
@@ -370,18 +376,17 @@ fn missing_or_corrupt_models_stop_the_tracker_at_start_with_a_clear_error() {
     let config_path = write_tracker_config(&dir, "bad", "");
     let text = std::fs::read_to_string(&config_path).expect("config");
     let model = root().join("models/teddy.mrsm");
-    let missing = text.replace(model.to_str().expect("utf-8"), "/no/such/teddy.mrsm");
+    let missing = text.replace(path_str(&model), "/no/such/teddy.mrsm");
     std::fs::write(&config_path, missing).expect("write");
-    let out = Command::new(mrsmap_bin()).args(["track", "--config", path(&config_path)]).output().expect("runs");
+    let out = mrsmap(&["track", "--config", path_str(&config_path)]);
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("/no/such/teddy.mrsm") && err.contains("teddy"), "{err}");
     let bytes = std::fs::read(&model).expect("model");
     let cut = dir.join("cut.mrsm");
     std::fs::write(&cut, &bytes[..bytes.len() / 2]).expect("write");
-    std::fs::write(&config_path, text.replace(model.to_str().expect("utf-8"), cut.to_str().expect("utf-8")))
-        .expect("write");
-    let out = Command::new(mrsmap_bin()).args(["track", "--config", path(&config_path)]).output().expect("runs");
+    std::fs::write(&config_path, text.replace(path_str(&model), path_str(&cut))).expect("write");
+    let out = mrsmap(&["track", "--config", path_str(&config_path)]);
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("truncated") && err.contains("cut.mrsm"), "{err}");
@@ -400,7 +405,16 @@ fn a_recording_that_cannot_be_written_is_named_at_start() {
     std::os::unix::fs::symlink("/dev/full", &partial).expect("symlink");
     let record = dir.join("run.mcap");
     let out = Command::new(mrsmap_bin())
-        .args(["track", "--config", path(&config_path), "--record", path(&record), "--force", "--idle-timeout", "1"])
+        .args([
+            "track",
+            "--config",
+            path_str(&config_path),
+            "--record",
+            path_str(&record),
+            "--force",
+            "--idle-timeout",
+            "1",
+        ])
         .output()
         .expect("runs");
     let err = String::from_utf8_lossy(&out.stderr);
@@ -413,19 +427,19 @@ fn camera_replays_mcap_and_the_tracker_records_what_it_receives() {
     let dir = temp_dir("mcap-live");
     let recording = dir.join("teddy.mcap");
     let out = Command::new(mrsmap_bin())
-        .args(["convert", "tum-to-mcap", path(&teddy_clip()), "--out", path(&recording)])
+        .args(["convert", "tum-to-mcap", path_str(&teddy_clip()), "--out", path_str(&recording)])
         .output()
         .expect("convert runs");
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let config_path = write_tracker_config(&dir, "mcaplive", "");
     let config = read_tracker_config(&config_path).expect("config");
     let recorded = dir.join("recorded.mcap");
-    let (tracker, tracker_err) = start(&["track", "--config", path(&config_path), "--record", path(&recorded)]);
+    let (tracker, tracker_err) = start(&["track", "--config", path_str(&config_path), "--record", path_str(&recorded)]);
     wait_for(&tracker_err, "ready", 60);
     let (client, client_err) = start(&["poses", "--service", &config.poses_service, "--count", "8", "--timeout", "30"]);
     wait_for(&client_err, "reading", 30);
     let (camera, _) =
-        start(&["camera", "--mcap", path(&recording), "--service", &config.camera_service, "--rate", "10"]);
+        start(&["camera", "--mcap", path_str(&recording), "--service", &config.camera_service, "--rate", "10"]);
     assert_eq!(finish(camera, 60).0, Some(0), "the driver sends the 8 frames of the recording and exits");
     let (code, out) = finish(client, 60);
     assert_eq!(code, Some(0), "client: {out}");
@@ -437,7 +451,7 @@ fn camera_replays_mcap_and_the_tracker_records_what_it_receives() {
     // The recording holds the 8 frames and the tracker's poses: replaying it tracks the
     // same frames, and its pose topics hold one pose per frame.
     let replayed = Command::new(mrsmap_bin())
-        .args(["replay", "--input", path(&recorded), "--config", path(&config_path)])
+        .args(["replay", "--input", path_str(&recorded), "--config", path_str(&config_path)])
         .output()
         .expect("replay runs");
     let stdout = String::from_utf8_lossy(&replayed.stdout);
@@ -465,7 +479,7 @@ fn a_tracker_restarts_while_clients_hold_its_poses() {
     let dir = temp_dir("restart");
     let config_path = write_tracker_config(&dir, "restart", "");
     let config = read_tracker_config(&config_path).expect("config");
-    let track = || start(&["track", "--config", path(&config_path)]);
+    let track = || start(&["track", "--config", path_str(&config_path)]);
     let (first, first_err) = track();
     wait_for(&first_err, "ready", 60);
     let driver = TestDriver::new(&config.camera_service);
@@ -522,7 +536,7 @@ fn a_driver_of_the_other_image_size_is_pointed_out() {
     let config_path = dir.join("tracker.toml");
     std::fs::write(&config_path, text).expect("write config");
     let config = read_tracker_config(&config_path).expect("config");
-    let (tracker, tracker_err) = start(&["track", "--config", path(&config_path), "--idle-timeout", "10"]);
+    let (tracker, tracker_err) = start(&["track", "--config", path_str(&config_path), "--idle-timeout", "10"]);
     wait_for(&tracker_err, "ready", 60);
     let _camera = start_looping_driver(&config.camera_service, "30");
     let seen = wait_for(&tracker_err, "no frame", 30);

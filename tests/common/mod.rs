@@ -208,7 +208,7 @@ pub fn reseal(bytes: &mut [u8]) {
 
 /// Runs the `mrsmap` binary with `args` and collects its output.
 pub fn mrsmap(args: &[&str]) -> std::process::Output {
-    std::process::Command::new(env!("CARGO_BIN_EXE_mrsmap")).args(args).output().expect("binary runs")
+    std::process::Command::new(mrsmap_bin()).args(args).output().expect("binary runs")
 }
 
 /// A path as the `&str` a command line takes.
