@@ -89,7 +89,7 @@ pub struct CameraArgs {
     #[command(flatten)]
     pub topics: TopicArgs,
     /// Service prefix; the tracker's config names the same (camera.service).
-    #[arg(long, default_value = "mrsmap/camera0", value_parser = service_name)]
+    #[arg(long, default_value = mrsmap::io::ipc::DEFAULT_CAMERA_SERVICE, value_parser = service_name)]
     pub service: String,
     /// Frames per second (0: as fast as possible).
     #[arg(long, default_value_t = 30.0)]

@@ -7,7 +7,7 @@
 //! | same name, event | — | the driver notifies after each send; subscribers wait on it (no polling) |
 //! | `mrsmap/poses` | blackboard, key `u32` object id → [`ObjectPose`] | created by the tracker (its only writer; a restarted tracker reopens the one its clients kept), ≤ 16 readers; each entry holds the object's newest pose |
 //! | `mrsmap/poses`, event | — | the tracker notifies after each frame's poses |
-//! | `mrsmap/detections` | [`ObjectDetection`] | safe overflow, subscriber buffer [`DETECTION_BUFFER`] (the oldest is dropped when more arrive between two frames), history 0, ≤ 8 publishers (detectors), ≤ 4 subscribers (trackers); no event: the tracker takes them before each frame |
+//! | `mrsmap/detections` | [`ObjectDetection`] | safe overflow, subscriber buffer 16 (the oldest is dropped when more arrive between two frames), history 0, ≤ 8 publishers (detectors), ≤ 4 subscribers (trackers); no event: the tracker takes them before each frame |
 //!
 //! Poses go on a blackboard rather than a publish–subscribe service: updating an entry
 //! writes shared memory in place, while iceoryx2 0.10's publisher allocates a small
@@ -25,14 +25,63 @@ use iceoryx2::service::port_factory::{blackboard, event, publish_subscribe};
 /// The iceoryx2 service flavour of every port: inter-process shared memory.
 pub type Ipc = iceoryx2::service::ipc::Service;
 
+/// The camera driver's default service prefix (`mrsmap camera --service`).
+pub const DEFAULT_CAMERA_SERVICE: &str = "mrsmap/camera0";
+
 /// The default pose service.
 pub const POSES_SERVICE: &str = "mrsmap/poses";
 
 /// The default detection service.
 pub const DETECTIONS_SERVICE: &str = "mrsmap/detections";
 
-/// Detections the tracker's subscriber holds between two frames.
-pub const DETECTION_BUFFER: usize = 16;
+/// The settings of a publish–subscribe service: every process opens it with these
+/// (src/io/mrsmap_wire.h has them for C and C++ programs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PubSubQos {
+    /// A full subscriber buffer drops its oldest sample instead of blocking the sender.
+    pub safe_overflow: bool,
+    /// Samples a subscriber holds until it takes them.
+    pub subscriber_max_buffer_size: usize,
+    /// Samples a subscriber may hold borrowed at once.
+    pub subscriber_max_borrowed_samples: usize,
+    /// Samples a late subscriber receives on connecting.
+    pub history_size: usize,
+    /// Most publishers.
+    pub max_publishers: usize,
+    /// Most subscribers.
+    pub max_subscribers: usize,
+}
+
+/// The frame services: a buffer of one with safe overflow, so a subscriber always takes
+/// the newest frame and the driver is never blocked.
+pub const FRAME_QOS: PubSubQos = PubSubQos {
+    safe_overflow: true,
+    subscriber_max_buffer_size: 1,
+    subscriber_max_borrowed_samples: 2,
+    history_size: 0,
+    max_publishers: 2,
+    max_subscribers: 8,
+};
+
+/// The detection service: the tracker's subscriber holds up to 16 detections between
+/// two frames (the oldest is dropped when more arrive).
+pub const DETECTION_QOS: PubSubQos = PubSubQos {
+    safe_overflow: true,
+    subscriber_max_buffer_size: 16,
+    subscriber_max_borrowed_samples: 2,
+    history_size: 0,
+    max_publishers: 8,
+    max_subscribers: 4,
+};
+
+/// Most notifiers of every event service (frames, poses).
+pub const EVENT_MAX_NOTIFIERS: usize = 4;
+
+/// Most listeners of every event service.
+pub const EVENT_MAX_LISTENERS: usize = 16;
+
+/// Most readers of the pose blackboard.
+pub const POSES_MAX_READERS: usize = 16;
 
 /// An iceoryx2 operation failed.
 #[derive(Debug, thiserror::Error)]
@@ -61,11 +110,17 @@ pub enum FrameSize {
 }
 
 impl FrameSize {
-    /// The frame service of camera `camera` at this size.
+    /// The frame service of camera `camera` at this size: the camera's prefix and
+    /// [`Self::suffix`].
     pub fn service(&self, camera: &str) -> String {
+        format!("{camera}{}", self.suffix())
+    }
+
+    /// What follows the camera's prefix in the name of its frame service at this size.
+    pub fn suffix(&self) -> &'static str {
         match self {
-            FrameSize::Vga => format!("{camera}/rgbd/vga"),
-            FrameSize::Qvga => format!("{camera}/rgbd/qvga"),
+            FrameSize::Vga => "/rgbd/vga",
+            FrameSize::Qvga => "/rgbd/qvga",
         }
     }
 
@@ -117,12 +172,12 @@ pub fn frames<F: WireFrame>(
 ) -> Result<publish_subscribe::PortFactory<Ipc, F, ()>, IpcError> {
     node.service_builder(&service_name(name)?)
         .publish_subscribe::<F>()
-        .enable_safe_overflow(true)
-        .subscriber_max_buffer_size(1)
-        .subscriber_max_borrowed_samples(2)
-        .history_size(0)
-        .max_publishers(2)
-        .max_subscribers(8)
+        .enable_safe_overflow(FRAME_QOS.safe_overflow)
+        .subscriber_max_buffer_size(FRAME_QOS.subscriber_max_buffer_size)
+        .subscriber_max_borrowed_samples(FRAME_QOS.subscriber_max_borrowed_samples)
+        .history_size(FRAME_QOS.history_size)
+        .max_publishers(FRAME_QOS.max_publishers)
+        .max_subscribers(FRAME_QOS.max_subscribers)
         .open_or_create()
         .map_err(|e| IpcError::new(format!("opening frame service {name}"), e))
 }
@@ -143,12 +198,12 @@ pub fn detections(
 ) -> Result<publish_subscribe::PortFactory<Ipc, ObjectDetection, ()>, IpcError> {
     node.service_builder(&service_name(name)?)
         .publish_subscribe::<ObjectDetection>()
-        .enable_safe_overflow(true)
-        .subscriber_max_buffer_size(DETECTION_BUFFER)
-        .subscriber_max_borrowed_samples(2)
-        .history_size(0)
-        .max_publishers(8)
-        .max_subscribers(4)
+        .enable_safe_overflow(DETECTION_QOS.safe_overflow)
+        .subscriber_max_buffer_size(DETECTION_QOS.subscriber_max_buffer_size)
+        .subscriber_max_borrowed_samples(DETECTION_QOS.subscriber_max_borrowed_samples)
+        .history_size(DETECTION_QOS.history_size)
+        .max_publishers(DETECTION_QOS.max_publishers)
+        .max_subscribers(DETECTION_QOS.max_subscribers)
         .open_or_create()
         .map_err(|e| IpcError::new(format!("opening detection service {name}"), e))
 }
@@ -157,8 +212,8 @@ pub fn detections(
 pub fn events(node: &Node<Ipc>, name: &str) -> Result<event::PortFactory<Ipc>, IpcError> {
     node.service_builder(&service_name(name)?)
         .event()
-        .max_notifiers(4)
-        .max_listeners(16)
+        .max_notifiers(EVENT_MAX_NOTIFIERS)
+        .max_listeners(EVENT_MAX_LISTENERS)
         .open_or_create()
         .map_err(|e| IpcError::new(format!("opening event service {name}"), e))
 }
@@ -204,7 +259,8 @@ pub fn publish_poses(
     if initial.len() > MAX_OBJECTS as usize {
         return Err(IpcError::new(format!("pose blackboard {name}"), format!("more than {MAX_OBJECTS} objects")));
     }
-    let mut builder = node.service_builder(&service_name(name)?).blackboard_creator::<u32>().max_readers(16);
+    let mut builder =
+        node.service_builder(&service_name(name)?).blackboard_creator::<u32>().max_readers(POSES_MAX_READERS);
     for (k, pose) in initial.iter().enumerate() {
         builder = builder.add::<ObjectPose>(k as u32, *pose);
     }
@@ -248,7 +304,7 @@ pub enum PosesKept {
 pub fn open_poses(node: &Node<Ipc>, name: &str) -> Result<PoseBlackboard, IpcError> {
     node.service_builder(&service_name(name)?)
         .blackboard_opener::<u32>()
-        .max_readers(16)
+        .max_readers(POSES_MAX_READERS)
         .open()
         .map_err(|e| IpcError::new(format!("opening pose blackboard {name}"), e))
 }

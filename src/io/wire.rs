@@ -13,6 +13,17 @@ use std::mem::MaybeUninit;
 /// Layout version of every message type here; a reader refuses other versions.
 pub const LAYOUT_VERSION: u32 = 2;
 
+/// The payload type name iceoryx2 compares when the ports of a service connect (the
+/// `#[type_name]` of each message type; a C++ program's `IOX2_TYPE_NAME`, see
+/// src/io/mrsmap_wire.h).
+pub fn type_name_of<T: ZeroCopySend>() -> &'static str {
+    // SAFETY: iceoryx2 asks that every definition under one name, in any language, have
+    // the same layout. The name is returned, not used to map memory; the definitions
+    // of these names in src/io/mrsmap_wire.h are checked against these by
+    // tests/c_header.rs.
+    unsafe { <T as ZeroCopySend>::type_name() }
+}
+
 /// What precedes the pixels of a frame.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[repr(C)]
