@@ -559,3 +559,25 @@ fn a_client_given_an_impossible_service_name_says_so_at_once() {
     assert!(err.contains("service name") && err.contains("ExceedsMaximumLength"), "{err}");
     assert!(started.elapsed() < Duration::from_secs(10), "it waited {:?}", started.elapsed());
 }
+
+#[test]
+fn a_third_camera_driver_on_one_service_is_told_why_it_cannot_publish() {
+    // A frame service takes two publishers (docs/wire-format.md): the third driver stops
+    // with iceoryx2's reason and what to do about it.
+    let service = format!("mrsmap_third_{}/camera", std::process::id());
+    let (clip, camera_file) = (teddy_clip(), fr3_camera_file());
+    let args = ["camera", "--dataset", path_str(&clip), "--camera", path_str(&camera_file), "--service", &service];
+    let looping = [&args[..], &["--loop"]].concat();
+    let (first, first_err) = start(&looping);
+    wait_for(&first_err, "publishing", 30);
+    let (second, second_err) = start(&looping);
+    wait_for(&second_err, "publishing", 30);
+    let out = Command::new(mrsmap_bin()).args(args).output().expect("runs");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("ExceedsMaxSupportedPublishers") && err.contains("2 camera drivers on a frame service"),
+        "{err}"
+    );
+    drop((first, second));
+}

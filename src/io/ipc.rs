@@ -94,10 +94,52 @@ pub struct IpcError {
 }
 
 impl IpcError {
-    /// An error while doing `what`.
+    /// An error while doing `what`; iceoryx2's errors that a user can act on get a hint
+    /// of what to do ([`hint`]).
     pub fn new(what: impl Into<String>, error: impl std::fmt::Debug) -> Self {
-        IpcError { what: what.into(), message: format!("{error:?}") }
+        let message = format!("{error:?}");
+        let message = match hint(&message) {
+            Some(hint) => format!("{message} ({hint})"),
+            None => message,
+        };
+        IpcError { what: what.into(), message }
     }
+}
+
+/// What to do about an iceoryx2 error, from the name of its variant (`message` is its
+/// `Debug` form, e.g. `PublishSubscribeOpenError(IncompatibleTypes)`).
+pub fn hint(message: &str) -> Option<&'static str> {
+    const HINTS: [(&str, &str); 9] = [
+        (
+            "ExceedsMaxSupportedPublishers",
+            "the service has all the publishers it allows, 2 camera drivers on a frame service or 8 detectors \
+             on the detection service: stop one of the others",
+        ),
+        (
+            "ExceedsMaxSupportedSubscribers",
+            "the service has all the subscribers it allows, 8 on a frame service or 4 trackers on the \
+             detection service: stop one of the others",
+        ),
+        ("ExceedsMaxSupportedReaders", "the pose service has all the 16 readers it allows: stop one of the clients"),
+        ("ExceedsMaxSupportedNotifiers", "the event service has all the 4 notifiers it allows: stop one of them"),
+        ("ExceedsMaxSupportedListeners", "the event service has all the 16 listeners it allows: stop one of them"),
+        (
+            "IncompatibleTypes",
+            "the service exists with another message type or size: a process built for another layout version \
+             (docs/wire-format.md)",
+        ),
+        (
+            "IncompatibleMessagingPattern",
+            "a service of this name exists for another messaging pattern: another program uses the name",
+        ),
+        (
+            "DoesNotSupportRequested",
+            "the service exists with other settings: every process must open it with those of \
+             docs/wire-format.md",
+        ),
+        ("IncompatibleOverflowBehavior", "the service exists without safe overflow: see docs/wire-format.md"),
+    ];
+    HINTS.iter().find(|(needle, _)| message.contains(needle)).map(|(_, hint)| *hint)
 }
 
 /// The image sizes on the wire.
@@ -312,4 +354,28 @@ pub fn open_poses(node: &Node<Ipc>, name: &str) -> Result<PoseBlackboard, IpcErr
 /// Nanoseconds since the Unix epoch (the stamps in the wire messages).
 pub fn now_ns() -> u64 {
     std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use iceoryx2::service::builder::publish_subscribe::{
+        PublishSubscribeOpenError as Open, PublishSubscribeOpenOrCreateError as OpenOrCreate,
+    };
+
+    #[test]
+    fn errors_a_user_can_act_on_get_a_hint_and_others_none() {
+        let nested =
+            IpcError::new("opening frame service x", OpenOrCreate::PublishSubscribeOpenError(Open::IncompatibleTypes));
+        assert!(
+            nested.to_string().starts_with(
+                "iceoryx2: opening frame service x: PublishSubscribeOpenError(IncompatibleTypes) (the service exists \
+                 with another message type"
+            ),
+            "{nested}"
+        );
+        let settings = IpcError::new("x", Open::DoesNotSupportRequestedAmountOfPublishers);
+        assert!(settings.message.contains("docs/wire-format.md"), "{settings}");
+        assert_eq!(IpcError::new("x", Open::InternalFailure).message, "InternalFailure");
+    }
 }
