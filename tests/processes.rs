@@ -4,6 +4,7 @@
 
 mod common;
 
+use common::process::{finish, signal, start, wait_for};
 use common::*;
 use mrsmap::eval::{ErrorStats, associate, ate_translation};
 use mrsmap::io::camera_file::read_camera;
@@ -12,48 +13,8 @@ use mrsmap::io::ipc;
 use mrsmap::io::tracker_config::read_tracker_config;
 use mrsmap::io::tum::{Trajectory, TumDataset};
 use mrsmap::io::wire::{FrameHeader, ObjectDetection, ObjectPose, RgbdFrameVga, detection_mode, status, write_frame};
-use std::io::{BufRead, BufReader};
-use std::process::{Child, Command, Stdio};
-use std::sync::mpsc::{Receiver, channel};
+use std::process::Command;
 use std::time::Duration;
-
-/// Starts `mrsmap ARGS`, forwarding its stderr lines to a channel.
-fn start(args: &[&str]) -> (ChildGuard, Receiver<String>) {
-    let mut child = Command::new(mrsmap_bin())
-        .args(args)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("mrsmap starts");
-    let stderr = child.stderr.take().expect("stderr");
-    let (tx, rx) = channel();
-    std::thread::spawn(move || {
-        // Keep draining even when nobody listens: a closed pipe would fail the child.
-        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
-            let _ = tx.send(line);
-        }
-    });
-    (ChildGuard(child), rx)
-}
-
-/// Waits for a stderr line containing `needle`.
-fn wait_for(rx: &Receiver<String>, needle: &str, seconds: u64) -> Vec<String> {
-    let mut seen = Vec::new();
-    let deadline = std::time::Instant::now() + Duration::from_secs(seconds);
-    while let Some(left) = deadline.checked_duration_since(std::time::Instant::now()) {
-        match rx.recv_timeout(left) {
-            Ok(line) => {
-                let done = line.contains(needle);
-                seen.push(line);
-                if done {
-                    return seen;
-                }
-            }
-            Err(_) => break,
-        }
-    }
-    panic!("no line with {needle:?} within {seconds} s; saw {seen:?}");
-}
 
 /// Starts `mrsmap camera` sending the shipped clip on `service`, with `extra` options.
 fn start_clip_driver(service: &str, extra: &[&str]) -> ChildGuard {
@@ -62,27 +23,6 @@ fn start_clip_driver(service: &str, extra: &[&str]) -> ChildGuard {
         vec!["camera", "--dataset", path_str(&clip), "--camera", path_str(&camera_file), "--service", service];
     args.extend_from_slice(extra);
     start(&args).0
-}
-
-fn signal(child: &Child, name: &str) {
-    let ok = Command::new("kill").args([&format!("-{name}"), &child.id().to_string()]).status().expect("kill runs");
-    assert!(ok.success());
-}
-
-/// Waits for the process to exit; returns (exit code, stdout).
-fn finish(mut guard: ChildGuard, seconds: u64) -> (Option<i32>, String) {
-    let deadline = std::time::Instant::now() + Duration::from_secs(seconds);
-    loop {
-        if let Some(status) = guard.0.try_wait().expect("wait") {
-            let mut out = String::new();
-            if let Some(mut stdout) = guard.0.stdout.take() {
-                let _ = std::io::Read::read_to_string(&mut stdout, &mut out);
-            }
-            return (status.code(), out);
-        }
-        assert!(std::time::Instant::now() < deadline, "process did not exit within {seconds} s");
-        std::thread::sleep(Duration::from_millis(50));
-    }
 }
 
 #[test]
@@ -558,26 +498,4 @@ fn a_client_given_an_impossible_service_name_says_so_at_once() {
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert!(err.contains("service name") && err.contains("ExceedsMaximumLength"), "{err}");
     assert!(started.elapsed() < Duration::from_secs(10), "it waited {:?}", started.elapsed());
-}
-
-#[test]
-fn a_third_camera_driver_on_one_service_is_told_why_it_cannot_publish() {
-    // A frame service takes two publishers (docs/wire-format.md): the third driver stops
-    // with iceoryx2's reason and what to do about it.
-    let service = format!("mrsmap_third_{}/camera", std::process::id());
-    let (clip, camera_file) = (teddy_clip(), fr3_camera_file());
-    let args = ["camera", "--dataset", path_str(&clip), "--camera", path_str(&camera_file), "--service", &service];
-    let looping = [&args[..], &["--loop"]].concat();
-    let (first, first_err) = start(&looping);
-    wait_for(&first_err, "publishing", 30);
-    let (second, second_err) = start(&looping);
-    wait_for(&second_err, "publishing", 30);
-    let out = Command::new(mrsmap_bin()).args(args).output().expect("runs");
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(1), "{err}");
-    assert!(
-        err.contains("ExceedsMaxSupportedPublishers") && err.contains("2 camera drivers on a frame service"),
-        "{err}"
-    );
-    drop((first, second));
 }

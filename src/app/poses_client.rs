@@ -30,8 +30,19 @@ pub struct PosesJob {
     pub count: Option<u64>,
     /// Stop after this long without a pose.
     pub timeout: Option<Duration>,
-    /// Print every pose (otherwise only a summary).
-    pub print: bool,
+    /// What to print of every pose.
+    pub print: Printing,
+}
+
+/// What `mrsmap poses` prints of every pose it receives.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Printing {
+    /// Nothing (only the summary at the end).
+    Nothing,
+    /// A line for a person to read.
+    Text,
+    /// One JSON object per pose and line ([`pose_json`]), for another program.
+    Json,
 }
 
 /// What was received.
@@ -224,7 +235,10 @@ fn handle(job: &PosesJob, p: &ObjectPose, objects: usize, reading: &mut Reading)
         push_recent(&mut summary.track_ms, summary.timed, RECENT_SAMPLES, f64::from(p.build_ms + p.register_ms));
         summary.timed += 1;
     }
-    if job.print {
+    if job.print == Printing::Json {
+        println!("{}", pose_json(p, &name, latency_ms));
+    }
+    if job.print == Printing::Text {
         let t = pose.translation.vector;
         println!(
             "{} {:<8} {:<13} camera_from_object t = [{:+.4}, {:+.4}, {:+.4}] m  q = [{:+.4}, {:+.4}, {:+.4}, {:+.4}]  quality {:.2}  free space {:.3}  track {:.2} ms  latency {:.2} ms",
@@ -252,6 +266,38 @@ fn handle(job: &PosesJob, p: &ObjectPose, objects: usize, reading: &mut Reading)
         };
         files.push(&name, objects, &line);
     }
+}
+
+/// One pose message as a JSON object (one line): every field of the message (the
+/// name as text, the status also by name as printed, the 6×6 covariance as 36 numbers,
+/// row-major), the latency from the driver's send to now, and `object_from_camera`, the
+/// inverse pose, as a TUM trajectory holds it. Numbers that are not finite are `null`.
+pub fn pose_json(p: &ObjectPose, name: &str, latency_ms: f64) -> String {
+    let object_from_camera = camera_from_object(p).inverse();
+    let (t, q) = crate::io::wire::pose_to_wire(&object_from_camera);
+    let value = serde_json::json!({
+        "object": name,
+        "object_id": p.object_id,
+        "frame_stamp_ns": p.frame_stamp_ns,
+        "frame_sequence": p.frame_sequence,
+        "frame_send_stamp_ns": p.frame_send_stamp_ns,
+        "publish_stamp_ns": p.publish_stamp_ns,
+        "status": status_name(p),
+        "status_code": p.status,
+        "bad_frames": p.bad_frames,
+        "camera_from_object": { "translation_m": p.translation_m, "rotation_xyzw": p.rotation_xyzw },
+        "object_from_camera": { "translation_m": t, "rotation_xyzw": q },
+        "covariance": &p.covariance[..],
+        "quality": p.quality,
+        "free_space": p.free_space,
+        "associations": p.associations,
+        "iterations": p.iterations,
+        "build_ms": p.build_ms,
+        "register_ms": p.register_ms,
+        "total_ms": p.total_ms,
+        "latency_ms": latency_ms,
+    });
+    value.to_string()
 }
 
 /// Where object `name`'s trajectory goes when `objects` objects are tracked: `path`
@@ -282,21 +328,86 @@ fn with_suffix(path: &Path, name: &str) -> PathBuf {
     path.with_file_name(file)
 }
 
-/// Prints the summary.
-pub fn print_summary(s: &PosesSummary) {
-    println!("poses: {} messages", s.received);
+/// The summary, for stdout (or, where stdout carries JSON lines, stderr).
+pub fn summary_text(s: &PosesSummary) -> String {
+    let mut text = format!("poses: {} messages\n", s.received);
     for (name, c) in &s.by_status {
-        println!(
-            "  {name}: {} tracking ({} held), {} lost, {} initialising, {} invalid frames",
+        text += &format!(
+            "  {name}: {} tracking ({} held), {} lost, {} initialising, {} invalid frames\n",
             c[0], c[4], c[1], c[2], c[3]
         );
     }
     if !s.latency_ms.is_empty() {
-        println!(
-            "  tracking per frame: median {:.2} ms; driver send → pose received: median {:.2} ms, p99 {:.2} ms",
+        text += &format!(
+            "  tracking per frame: median {:.2} ms; driver send → pose received: median {:.2} ms, p99 {:.2} ms\n",
             percentile(&s.track_ms, 0.5),
             percentile(&s.latency_ms, 0.5),
             percentile(&s.latency_ms, 0.99)
         );
+    }
+    text
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::io::wire::name_bytes;
+
+    fn message() -> ObjectPose {
+        let mut covariance = [0.0; 36];
+        (0..6).for_each(|i| covariance[7 * i] = 1e-6 * (i + 1) as f64);
+        covariance[1] = f64::NAN;
+        ObjectPose {
+            layout_version: LAYOUT_VERSION,
+            object_id: 1,
+            frame_stamp_ns: 1_341_841_876_589_905_000,
+            frame_sequence: 7,
+            frame_send_stamp_ns: 1_341_841_876_600_000_000,
+            publish_stamp_ns: 1_341_841_876_604_000_000,
+            translation_m: [0.1, -0.2, 1.0],
+            // 90° about z.
+            rotation_xyzw: [0.0, 0.0, std::f64::consts::FRAC_1_SQRT_2, std::f64::consts::FRAC_1_SQRT_2],
+            covariance,
+            quality: 1.2,
+            status: status::TRACKING,
+            bad_frames: 1,
+            associations: 1234,
+            iterations: 6,
+            build_ms: 1.5,
+            register_ms: 2.25,
+            total_ms: 4.0,
+            free_space: 0.01,
+            name: name_bytes("teddy \"bear\""),
+        }
+    }
+
+    #[test]
+    fn a_pose_as_json_holds_every_field_and_the_inverse_pose() {
+        let line = pose_json(&message(), &object_name(&message()), 3.5);
+        assert!(!line.contains('\n'));
+        let v: serde_json::Value = serde_json::from_str(&line).expect("valid JSON");
+        assert_eq!(v["object"], "teddy \"bear\"");
+        assert_eq!(v["frame_stamp_ns"], 1_341_841_876_589_905_000u64);
+        assert_eq!(v["status"], "held");
+        assert_eq!(v["status_code"], 0);
+        assert_eq!(v["bad_frames"], 1);
+        assert_eq!(v["associations"], 1234);
+        assert_eq!(v["register_ms"], 2.25);
+        assert_eq!(v["latency_ms"], 3.5);
+        assert_eq!(v["camera_from_object"]["translation_m"][1], -0.2);
+        let cov = v["covariance"].as_array().expect("36 numbers");
+        assert_eq!(cov.len(), 36);
+        assert!(cov[1].is_null(), "a NaN is null");
+        assert_eq!(cov[35], 6e-6);
+        // object_from_camera = camera_from_object⁻¹: -Rᵀt with R = 90° about z.
+        let t: Vec<f64> = v["object_from_camera"]["translation_m"]
+            .as_array()
+            .expect("3")
+            .iter()
+            .map(|x| x.as_f64().expect("number"))
+            .collect();
+        for (got, want) in t.iter().zip([0.2, 0.1, -1.0]) {
+            assert!((got - want).abs() < 1e-12, "{t:?}");
+        }
     }
 }

@@ -27,8 +27,14 @@ pub struct PosesArgs {
     #[arg(long)]
     pub timeout: Option<f64>,
     /// Print only the summary, not every pose.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "json")]
     pub quiet: bool,
+    /// Print every pose as one JSON object per line (JSON Lines) on stdout, with every
+    /// field of the message plus object_from_camera and the latency, and the summary on
+    /// stderr: for a program that reads poses without iceoryx2, e.g. `mrsmap poses --json
+    /// | python3 log.py`. Stdout is flushed at every line.
+    #[arg(long)]
+    pub json: bool,
 }
 
 #[derive(Args)]

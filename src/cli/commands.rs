@@ -209,6 +209,7 @@ pub fn camera(a: CameraArgs) -> Result<()> {
 
 /// `mrsmap poses`.
 pub fn poses(a: PosesArgs) -> Result<()> {
+    use app::poses_client::Printing;
     check_outputs([("--out", a.out.as_deref())], &[])?;
     let job = app::poses_client::PosesJob {
         service: a.service,
@@ -216,10 +217,20 @@ pub fn poses(a: PosesArgs) -> Result<()> {
         force: a.force,
         count: a.count,
         timeout: seconds(a.timeout, "--timeout")?,
-        print: !a.quiet,
+        print: match (a.quiet, a.json) {
+            (true, _) => Printing::Nothing,
+            (false, true) => Printing::Json,
+            (false, false) => Printing::Text,
+        },
     };
     let s = app::poses_client::run(&job)?;
-    app::poses_client::print_summary(&s);
+    // With --json, stdout holds only the poses.
+    let summary = app::poses_client::summary_text(&s);
+    if a.json {
+        eprint!("{summary}")
+    } else {
+        print!("{summary}")
+    }
     Ok(())
 }
 

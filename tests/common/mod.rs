@@ -2,6 +2,7 @@
 #![allow(dead_code)]
 
 pub mod counting_alloc;
+pub mod process;
 pub mod scenes;
 
 use mrsmap::frame::RgbdFrame;
