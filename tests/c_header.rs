@@ -106,9 +106,9 @@ fn layouts() -> Vec<Layout> {
 }
 
 /// The header's numeric constants and the values the Rust side has for them.
-fn numbers() -> Vec<(&'static str, u64)> {
-    let qos = |prefix: &'static str, q: PubSubQos| {
-        let name = |field: &str| -> &'static str { format!("MRSMAP_{prefix}_{field}").leak() };
+fn numbers() -> Vec<(String, u64)> {
+    let qos = |prefix: &str, q: PubSubQos| {
+        let name = |field: &str| format!("MRSMAP_{prefix}_{field}");
         vec![
             (name("SAFE_OVERFLOW"), u64::from(q.safe_overflow)),
             (name("SUBSCRIBER_MAX_BUFFER_SIZE"), q.subscriber_max_buffer_size as u64),
@@ -118,7 +118,7 @@ fn numbers() -> Vec<(&'static str, u64)> {
             (name("MAX_SUBSCRIBERS"), q.max_subscribers as u64),
         ]
     };
-    let mut all = vec![
+    let mut all: Vec<(String, u64)> = [
         ("MRSMAP_LAYOUT_VERSION", u64::from(wire::LAYOUT_VERSION)),
         ("MRSMAP_EVENT_MAX_NOTIFIERS", ipc::EVENT_MAX_NOTIFIERS as u64),
         ("MRSMAP_EVENT_MAX_LISTENERS", ipc::EVENT_MAX_LISTENERS as u64),
@@ -130,7 +130,10 @@ fn numbers() -> Vec<(&'static str, u64)> {
         ("MRSMAP_STATUS_INVALID_FRAME", u64::from(status::INVALID_FRAME)),
         ("MRSMAP_DETECTION_WHEN_NOT_TRACKING", u64::from(detection_mode::WHEN_NOT_TRACKING)),
         ("MRSMAP_DETECTION_ALWAYS", u64::from(detection_mode::ALWAYS)),
-    ];
+    ]
+    .into_iter()
+    .map(|(name, v)| (name.to_string(), v))
+    .collect();
     all.extend(qos("FRAME", FRAME_QOS));
     all.extend(qos("DETECTION", DETECTION_QOS));
     all

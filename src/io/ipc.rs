@@ -378,4 +378,19 @@ mod tests {
         assert!(settings.message.contains("docs/wire-format.md"), "{settings}");
         assert_eq!(IpcError::new("x", Open::InternalFailure).message, "InternalFailure");
     }
+
+    #[test]
+    fn the_hints_give_the_limits_the_services_have() {
+        let says = |error: &str, limits: &[usize]| {
+            let h = hint(error).expect("a hint");
+            for n in limits {
+                assert!(h.contains(&format!("{n} ")), "{error}: {h} lacks {n}");
+            }
+        };
+        says("ExceedsMaxSupportedPublishers", &[FRAME_QOS.max_publishers, DETECTION_QOS.max_publishers]);
+        says("ExceedsMaxSupportedSubscribers", &[FRAME_QOS.max_subscribers, DETECTION_QOS.max_subscribers]);
+        says("ExceedsMaxSupportedReaders", &[POSES_MAX_READERS]);
+        says("ExceedsMaxSupportedNotifiers", &[EVENT_MAX_NOTIFIERS]);
+        says("ExceedsMaxSupportedListeners", &[EVENT_MAX_LISTENERS]);
+    }
 }
