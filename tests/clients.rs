@@ -43,6 +43,14 @@ fn the_pose_client_prints_json_lines_a_program_can_read() {
 }
 
 #[test]
+fn json_lines_and_quiet_are_refused_together() {
+    let out = mrsmap(&["poses", "--json", "--quiet"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("'--json' cannot be used with '--quiet'"), "{err}");
+}
+
+#[test]
 fn a_third_camera_driver_on_one_service_is_told_why_it_cannot_publish() {
     // A frame service takes two publishers (docs/wire-format.md): the third driver stops
     // with iceoryx2's reason and what to do about it.

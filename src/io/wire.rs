@@ -1,7 +1,9 @@
 //! The wire types shared by every process (and by drivers in C++ or Python): RGB-D
 //! frames in, object poses out, laid out `#[repr(C)]` without implicit padding so that
 //! they can live in iceoryx2 shared memory. The only module with `unsafe` code: writing
-//! a loaned, uninitialised sample in place. docs/wire-format.md describes the layout.
+//! a loaned, uninitialised sample in place. docs/wire-format.md describes the layout;
+//! src/io/mrsmap_wire.h declares the same types for C and C++ (tests/c_header.rs
+//! checks that the two agree).
 
 #![allow(unsafe_code)]
 
