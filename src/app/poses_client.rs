@@ -235,28 +235,10 @@ fn handle(job: &PosesJob, p: &ObjectPose, objects: usize, reading: &mut Reading)
         push_recent(&mut summary.track_ms, summary.timed, RECENT_SAMPLES, f64::from(p.build_ms + p.register_ms));
         summary.timed += 1;
     }
-    if job.print == Printing::Json {
-        println!("{}", pose_json(p, &name, latency_ms));
-    }
-    if job.print == Printing::Text {
-        let t = pose.translation.vector;
-        println!(
-            "{} {:<8} {:<13} camera_from_object t = [{:+.4}, {:+.4}, {:+.4}] m  q = [{:+.4}, {:+.4}, {:+.4}, {:+.4}]  quality {:.2}  free space {:.3}  track {:.2} ms  latency {:.2} ms",
-            format_stamp(p.frame_stamp_ns),
-            name,
-            status_name(p),
-            t.x,
-            t.y,
-            t.z,
-            p.rotation_xyzw[0],
-            p.rotation_xyzw[1],
-            p.rotation_xyzw[2],
-            p.rotation_xyzw[3],
-            p.quality,
-            p.free_space,
-            p.build_ms + p.register_ms,
-            latency_ms
-        );
+    match job.print {
+        Printing::Nothing => {}
+        Printing::Json => println!("{}", pose_json(p, &name, &pose, latency_ms)),
+        Printing::Text => print_pose(p, &name, &pose, latency_ms),
     }
     if let Some(files) = &mut reading.files {
         let line = if p.is_fresh() {
@@ -268,12 +250,35 @@ fn handle(job: &PosesJob, p: &ObjectPose, objects: usize, reading: &mut Reading)
     }
 }
 
-/// One pose message as a JSON object (one line): every field of the message (the
-/// name as text, the status also by name as printed, the 6×6 covariance as 36 numbers,
-/// row-major), the latency from the driver's send to now, and `object_from_camera`, the
-/// inverse pose, as a TUM trajectory holds it. Numbers that are not finite are `null`.
-pub fn pose_json(p: &ObjectPose, name: &str, latency_ms: f64) -> String {
-    let object_from_camera = camera_from_object(p).inverse();
+/// One pose as a line for a person to read.
+fn print_pose(p: &ObjectPose, name: &str, pose: &Pose, latency_ms: f64) {
+    let t = pose.translation.vector;
+    println!(
+        "{} {:<8} {:<13} camera_from_object t = [{:+.4}, {:+.4}, {:+.4}] m  q = [{:+.4}, {:+.4}, {:+.4}, {:+.4}]  quality {:.2}  free space {:.3}  track {:.2} ms  latency {:.2} ms",
+        format_stamp(p.frame_stamp_ns),
+        name,
+        status_name(p),
+        t.x,
+        t.y,
+        t.z,
+        p.rotation_xyzw[0],
+        p.rotation_xyzw[1],
+        p.rotation_xyzw[2],
+        p.rotation_xyzw[3],
+        p.quality,
+        p.free_space,
+        p.build_ms + p.register_ms,
+        latency_ms
+    );
+}
+
+/// One pose message, whose pose is `camera_from_object`, as a JSON object (one line):
+/// every field of the message (the name as text, the status also by name as printed,
+/// the 6×6 covariance as 36 numbers, row-major), the latency from the driver's send to
+/// now, and `object_from_camera`, the inverse pose, as a TUM trajectory holds it.
+/// Numbers that are not finite are `null`.
+pub fn pose_json(p: &ObjectPose, name: &str, camera_from_object: &Pose, latency_ms: f64) -> String {
+    let object_from_camera = camera_from_object.inverse();
     let (t, q) = crate::io::wire::pose_to_wire(&object_from_camera);
     let value = serde_json::json!({
         "object": name,
@@ -383,7 +388,8 @@ mod tests {
 
     #[test]
     fn a_pose_as_json_holds_every_field_and_the_inverse_pose() {
-        let line = pose_json(&message(), &object_name(&message()), 3.5);
+        let m = message();
+        let line = pose_json(&m, &object_name(&m), &camera_from_object(&m), 3.5);
         assert!(!line.contains('\n'));
         let v: serde_json::Value = serde_json::from_str(&line).expect("valid JSON");
         assert_eq!(v["object"], "teddy \"bear\"");

@@ -20,6 +20,7 @@ use iceoryx2::node::Node;
 use iceoryx2::port::writer::EntryHandleMutError;
 use iceoryx2::prelude::*;
 use iceoryx2::service::builder::blackboard::BlackboardCreateError;
+use iceoryx2::service::builder::publish_subscribe as publish_subscribe_builder;
 use iceoryx2::service::port_factory::{blackboard, event, publish_subscribe};
 
 /// The iceoryx2 service flavour of every port: inter-process shared memory.
@@ -50,6 +51,22 @@ pub struct PubSubQos {
     pub max_publishers: usize,
     /// Most subscribers.
     pub max_subscribers: usize,
+}
+
+impl PubSubQos {
+    /// `builder` with these settings.
+    fn apply<P: std::fmt::Debug + ZeroCopySend>(
+        &self,
+        builder: publish_subscribe_builder::Builder<P, (), Ipc>,
+    ) -> publish_subscribe_builder::Builder<P, (), Ipc> {
+        builder
+            .enable_safe_overflow(self.safe_overflow)
+            .subscriber_max_buffer_size(self.subscriber_max_buffer_size)
+            .subscriber_max_borrowed_samples(self.subscriber_max_borrowed_samples)
+            .history_size(self.history_size)
+            .max_publishers(self.max_publishers)
+            .max_subscribers(self.max_subscribers)
+    }
 }
 
 /// The frame services: a buffer of one with safe overflow, so a subscriber always takes
@@ -212,14 +229,8 @@ pub fn frames<F: WireFrame>(
     node: &Node<Ipc>,
     name: &str,
 ) -> Result<publish_subscribe::PortFactory<Ipc, F, ()>, IpcError> {
-    node.service_builder(&service_name(name)?)
-        .publish_subscribe::<F>()
-        .enable_safe_overflow(FRAME_QOS.safe_overflow)
-        .subscriber_max_buffer_size(FRAME_QOS.subscriber_max_buffer_size)
-        .subscriber_max_borrowed_samples(FRAME_QOS.subscriber_max_borrowed_samples)
-        .history_size(FRAME_QOS.history_size)
-        .max_publishers(FRAME_QOS.max_publishers)
-        .max_subscribers(FRAME_QOS.max_subscribers)
+    FRAME_QOS
+        .apply(node.service_builder(&service_name(name)?).publish_subscribe::<F>())
         .open_or_create()
         .map_err(|e| IpcError::new(format!("opening frame service {name}"), e))
 }
@@ -238,14 +249,8 @@ pub fn detections(
     node: &Node<Ipc>,
     name: &str,
 ) -> Result<publish_subscribe::PortFactory<Ipc, ObjectDetection, ()>, IpcError> {
-    node.service_builder(&service_name(name)?)
-        .publish_subscribe::<ObjectDetection>()
-        .enable_safe_overflow(DETECTION_QOS.safe_overflow)
-        .subscriber_max_buffer_size(DETECTION_QOS.subscriber_max_buffer_size)
-        .subscriber_max_borrowed_samples(DETECTION_QOS.subscriber_max_borrowed_samples)
-        .history_size(DETECTION_QOS.history_size)
-        .max_publishers(DETECTION_QOS.max_publishers)
-        .max_subscribers(DETECTION_QOS.max_subscribers)
+    DETECTION_QOS
+        .apply(node.service_builder(&service_name(name)?).publish_subscribe::<ObjectDetection>())
         .open_or_create()
         .map_err(|e| IpcError::new(format!("opening detection service {name}"), e))
 }
