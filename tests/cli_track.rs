@@ -203,3 +203,31 @@ fn the_quality_measurement_writes_every_registration() {
     assert_eq!(rows.len() - 1, 2 * tracked, "two registrations per tracked frame: {csv}");
     assert!(rows[1..].iter().all(|r| r.split(',').count() == 8), "{csv}");
 }
+
+#[test]
+fn a_configuration_from_print_default_config_tracks_the_clip() {
+    let out = mrsmap(&["track", "--print-default-config"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = String::from_utf8(out.stdout).expect("UTF-8");
+    assert!(text.contains("[tracker]\n") && text.contains("[[object]]\n"), "{text}");
+    // Where a user puts it: beside a models folder holding the model it names.
+    let dir = temp_dir("default-config");
+    std::fs::create_dir_all(dir.join("robot_config")).expect("folder");
+    std::fs::create_dir_all(dir.join("models")).expect("folder");
+    std::fs::copy(root().join("models/teddy.mrsm"), dir.join("models/teddy.mrsm")).expect("model");
+    let config = dir.join("robot_config/mine.toml");
+    std::fs::write(&config, &text).expect("config");
+    let (clip, camera) = (teddy_clip(), fr3_camera_file());
+    let args = ["track", "--config", path_str(&config), "--dataset", path_str(&clip), "--camera", path_str(&camera)];
+    let out = mrsmap(&args);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let summary = String::from_utf8_lossy(&out.stdout);
+    assert!(summary.contains("8 frames tracking"), "{summary}");
+    // Neither a configuration nor the request for one: the error says what to give.
+    let out = mrsmap(&["track"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--config"), "{err}");
+    let out = mrsmap(&["track", "--print-default-config", "--config", path_str(&config)]);
+    assert!(!out.status.success(), "the request takes no other option");
+}

@@ -110,9 +110,15 @@ pub struct CameraArgs {
 
 #[derive(Args)]
 pub struct TrackArgs {
-    /// Tracker configuration, e.g. robot_config/tracker.toml.
-    #[arg(long)]
-    pub config: PathBuf,
+    /// Tracker configuration, e.g. robot_config/tracker.toml (`--print-default-config`
+    /// writes one with every key at its default and what it does).
+    #[arg(long, required_unless_present = "print_default_config")]
+    pub config: Option<PathBuf>,
+    /// Print the whole tracker configuration with every key at its default, each
+    /// explained, and one example object, then exit (`mrsmap track
+    /// --print-default-config > my_robot.toml`, then edit the camera service and the objects).
+    #[arg(long, exclusive = true)]
+    pub print_default_config: bool,
     /// Stop after this many frames (live mode).
     #[arg(long, value_parser = at_least_one::<u64>)]
     pub max_frames: Option<u64>,

@@ -45,7 +45,14 @@ fn exit_code(interrupted: Option<Interrupted>) -> ExitCode {
 
 /// `mrsmap track`: live, or over a dataset.
 pub fn track(a: TrackArgs) -> Result<ExitCode> {
-    let mut config = mrsmap::io::tracker_config::read_tracker_config(&a.config)?;
+    if a.print_default_config {
+        use std::io::Write;
+        let text = mrsmap::io::tracker_config::default_tracker_config();
+        std::io::stdout().write_all(text.as_bytes()).context("cannot write the configuration to stdout")?;
+        return Ok(ExitCode::SUCCESS);
+    }
+    let config_path = a.config.ok_or_else(|| anyhow::anyhow!("--config is needed (or --print-default-config)"))?;
+    let mut config = mrsmap::io::tracker_config::read_tracker_config(&config_path)?;
     if let Some(s) = a.camera_service {
         config.camera_service = s;
     }
@@ -63,7 +70,7 @@ pub fn track(a: TrackArgs) -> Result<ExitCode> {
             simulated_detector(a.reinitialise_at_ground_truth, a.detector_error.as_deref(), a.detector_latency)?;
         let camera = a.camera.ok_or_else(|| anyhow::anyhow!("--dataset needs --camera (the dataset's camera file)"))?;
         let mut inputs = dataset_and_camera(&dataset, Some(&camera));
-        inputs.extend(tracker_inputs(&a.config, &config));
+        inputs.extend(tracker_inputs(&config_path, &config));
         let trajectories = trajectory_files(a.trajectory.as_deref(), &config);
         check_outputs(trajectories.iter().map(|p| ("--trajectory", Some(p.as_path()))), &inputs)?;
         let job = app::track_dataset::TrackDatasetJob {
@@ -87,7 +94,7 @@ pub fn track(a: TrackArgs) -> Result<ExitCode> {
         max_frames: a.max_frames,
         idle_timeout: seconds(a.idle_timeout, "--idle-timeout")?,
     };
-    check_outputs([("--record", a.record.as_deref())], &tracker_inputs(&a.config, &config))?;
+    check_outputs([("--record", a.record.as_deref())], &tracker_inputs(&config_path, &config))?;
     let record =
         a.record.map(|path| app::recorder::RecordOptions { path, last_seconds: a.record_last, force: a.force });
     let mut summary = app::tracker_process::run(&config, &limits, record.as_ref())?;

@@ -1,48 +1,29 @@
 //! The tracker's configuration (`robot_config/tracker.toml`): read into raw serde
 //! structs, then checked into typed parameters. Keys are the names of the fields they
-//! set; every key but the objects' has a default.
+//! set; every key but the objects' has a default. [`default_tracker_config`] writes the
+//! whole file with every key at its default and what it does (`mrsmap track
+//! --print-default-config`); in short:
 //!
 //! ```toml
-//! [camera]
+//! [camera]                     # optional, as are [poses], [detections] and [tracker]
 //! service = "mrsmap/camera0"   # the camera driver's --service
 //! size = "vga"                 # "vga" or "qvga": the frame message type
 //!
-//! [poses]                      # optional
-//! service = "mrsmap/poses"     # where poses are published
-//!
-//! [detections]                 # optional: an external detector's poses (`mrsmap detect`)
-//! service = "mrsmap/detections"
-//! max_age_s = 1.0              # older detections (by their frame's stamp) are ignored
-//!
-//! [tracker]                    # all optional
-//! threads = 2
-//! pin_threads = true          # one CPU per worker when as many as the process's CPUs
+//! [tracker]
 //! lambda = 0.01                # scene-map resolution factor
-//! gate_mahalanobis2 = 12.0
-//! region_margin_px = 16.0
-//! min_quality = 0.5
-//! min_quality_initialise = 0.6
-//! max_free_space = 0.1         # failed when more of the model is seen through (1: off)
-//! free_space_margin_m = 0.02
-//! lost_after_frames = 3
-//! retry_from_last_pose = true  # a failed frame is registered again from the last pose
-//! search_near_last_pose = true # after a loss, look around the last pose first
-//! follow_tracked_objects = true # objects not seen follow the camera motion the tracked ones measure
-//! lm_max_iterations = 10
-//! newton_iterations = 2
-//! coarsest_level = 4
-//! step_tolerance = 0.002
-//! confirm_convergence = true   # false: registration ~20 % cheaper, slightly less accurate
-//! covariance = "clustered"     # or "eq6" (the paper's): the published covariance
-//! covariance_scale = 1.0       # multiplies the published covariance
+//! min_quality = 0.5            # below: the registration failed
 //!
-//! [[object]]
+//! [[object]]                   # one per object: these have no defaults
 //! name = "teddy"
 //! model = "../models/teddy.mrsm"           # relative to this file
 //! camera_from_object = [0.1, 0.2, 0.9, 0.0, 0.0, 0.0, 1.0]   # tx ty tz qx qy qz qw
 //! search_translation_m = 0.05              # optional
 //! search_yaw_deg = 20.0                    # optional
 //! ```
+
+mod template;
+
+pub use template::default_tracker_config;
 
 use super::ipc::FrameSize;
 use crate::geometry::Pose;
@@ -116,6 +97,7 @@ pub struct TrackerConfig {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawConfig {
+    #[serde(default)]
     camera: RawCamera,
     #[serde(default)]
     poses: RawPoses,
@@ -130,21 +112,37 @@ struct RawConfig {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawCamera {
+    #[serde(default = "default_camera_service")]
     service: String,
     #[serde(default = "default_size")]
     size: String,
 }
 
+impl Default for RawCamera {
+    fn default() -> Self {
+        RawCamera { service: default_camera_service(), size: default_size() }
+    }
+}
+
+fn default_camera_service() -> String {
+    super::ipc::DEFAULT_CAMERA_SERVICE.into()
+}
+
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawPoses {
+    #[serde(default = "default_poses_service")]
     service: String,
 }
 
 impl Default for RawPoses {
     fn default() -> Self {
-        RawPoses { service: super::ipc::POSES_SERVICE.into() }
+        RawPoses { service: default_poses_service() }
     }
+}
+
+fn default_poses_service() -> String {
+    super::ipc::POSES_SERVICE.into()
 }
 
 #[derive(Debug, Deserialize)]
@@ -166,12 +164,21 @@ fn default_detections_service() -> String {
     super::ipc::DETECTIONS_SERVICE.into()
 }
 
+/// `detections.max_age_s` when absent.
+const DEFAULT_MAX_AGE_S: f64 = 1.0;
+
+/// `camera.size` when absent.
+const DEFAULT_SIZE: &str = "vga";
+
+/// `tracker.pin_threads` when absent.
+const DEFAULT_PIN_THREADS: bool = true;
+
 fn default_max_age_s() -> f64 {
-    1.0
+    DEFAULT_MAX_AGE_S
 }
 
 fn default_size() -> String {
-    "vga".into()
+    DEFAULT_SIZE.into()
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -291,7 +298,7 @@ pub fn parse_tracker_config(text: &str, origin: &Path) -> Result<TrackerConfig, 
         detections_service: raw.detections.service,
         detection_max_age_ns: (max_age_s * 1e9).round() as u64,
         threads: t.threads,
-        pin_threads: t.pin_threads.unwrap_or(true),
+        pin_threads: t.pin_threads.unwrap_or(DEFAULT_PIN_THREADS),
         params,
         objects,
     })
