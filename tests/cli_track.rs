@@ -231,3 +231,34 @@ fn a_configuration_from_print_default_config_tracks_the_clip() {
     let out = mrsmap(&["track", "--print-default-config", "--config", path_str(&config)]);
     assert!(!out.status.success(), "the request takes no other option");
 }
+
+#[test]
+fn track_check_loads_everything_and_names_a_start_pose_out_of_view() {
+    let config = root().join("robot_config/tracker.toml");
+    let out = mrsmap(&["track", "--config", path_str(&config), "--check"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}{}", String::from_utf8_lossy(&out.stderr));
+    assert!(text.contains("tracker.toml: valid") && text.contains("object 'teddy': model"), "{text}");
+    assert!(text.contains("0.98 m away") && text.contains("would start"), "{text}");
+    let dir = temp_dir("check");
+    let shipped = std::fs::read_to_string(&config).expect("config");
+    let models = root().join("models");
+    let absolute = shipped.replace("\"../models/", &format!("\"{}/", models.display()));
+    // The pose written the other way round (object_from_camera): it parses, and the
+    // check says what it probably is.
+    let start = shipped.lines().find(|l| l.starts_with("camera_from_object")).expect("a start pose");
+    let inverted = "camera_from_object = [0.63604, 0.66766, 0.53327, 0.25098, 0.79599, -0.53327, -0.13797]";
+    let path = dir.join("inverted.toml");
+    std::fs::write(&path, absolute.replace(start, inverted)).expect("config");
+    let out = mrsmap(&["track", "--config", path_str(&path), "--check"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(3), "{err}");
+    assert!(err.contains("warning: object 'teddy'") && err.contains("given as object_from_camera"), "{err}");
+    // A model that is not there: the tracker would not start.
+    let path = dir.join("missing.toml");
+    std::fs::write(&path, absolute.replace("teddy.mrsm", "no_such.mrsm")).expect("config");
+    let out = mrsmap(&["track", "--config", path_str(&path), "--check"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("no_such.mrsm") && err.contains("'teddy'"), "{err}");
+}

@@ -29,5 +29,6 @@ pub mod replay_detections;
 pub mod report;
 pub mod synth;
 pub mod track_dataset;
+pub mod tracker_check;
 pub mod tracker_process;
 pub mod tracking;

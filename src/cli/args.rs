@@ -119,6 +119,14 @@ pub struct TrackArgs {
     /// --print-default-config > my_robot.toml`, then edit the camera service and the objects).
     #[arg(long, exclusive = true)]
     pub print_default_config: bool,
+    /// Check the configuration and exit: read it, load and check every model, allocate
+    /// the tracker for the configured image size and plan where its workers run, as the
+    /// tracker does at start-up, without opening a service; then print what it would run
+    /// and where each start pose puts its object (a warning, exit code 3, if out of a
+    /// camera's view: e.g. a pose given as object_from_camera). Exit code 1: it would not
+    /// start.
+    #[arg(long, requires = "config", conflicts_with_all = ["dataset", "record", "max_frames", "idle_timeout"])]
+    pub check: bool,
     /// Stop after this many frames (live mode).
     #[arg(long, value_parser = at_least_one::<u64>)]
     pub max_frames: Option<u64>,

@@ -65,6 +65,9 @@ pub fn track(a: TrackArgs) -> Result<ExitCode> {
     if config.detections_service == config.poses_service {
         anyhow::bail!("the detection and pose services are both {}: they must differ", config.poses_service);
     }
+    if a.check {
+        return check_tracker_config(&config_path, &config);
+    }
     if let Some(dataset) = a.dataset {
         let detector =
             simulated_detector(a.reinitialise_at_ground_truth, a.detector_error.as_deref(), a.detector_latency)?;
@@ -104,6 +107,25 @@ pub fn track(a: TrackArgs) -> Result<ExitCode> {
         Some(e) => Err(e),
         None => Ok(ExitCode::SUCCESS),
     }
+}
+
+/// The exit code of `mrsmap track --check` when the tracker would start but something
+/// looks wrong (2 is a command-line error).
+const CHECK_WARNINGS_EXIT: u8 = 3;
+
+/// `mrsmap track --check`: exit code 0 when the tracker would start and every object
+/// starts in view, [`CHECK_WARNINGS_EXIT`] with warnings; an error (exit code 1) when it
+/// would not start.
+fn check_tracker_config(path: &Path, config: &mrsmap::io::tracker_config::TrackerConfig) -> Result<ExitCode> {
+    let report = app::tracker_check::check(config)?;
+    println!("{}: valid", path.display());
+    for line in &report.lines {
+        println!("{line}");
+    }
+    for warning in &report.warnings {
+        eprintln!("warning: {warning}");
+    }
+    Ok(if report.warnings.is_empty() { ExitCode::SUCCESS } else { ExitCode::from(CHECK_WARNINGS_EXIT) })
 }
 
 /// Default odometry parameters with the map resolution factor λ.

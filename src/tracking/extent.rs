@@ -103,6 +103,11 @@ impl ModelExtent {
         })
     }
 
+    /// The mean of the model's points (object frame).
+    pub fn mean(&self) -> &Vector3<f64> {
+        &self.mean
+    }
+
     /// The gate at `object_from_camera`: points inside the volume and within
     /// `max_mahalanobis2` of the model's distribution.
     pub fn gate(&self, object_from_camera: &Pose, max_mahalanobis2: f64) -> PixelGate {
