@@ -254,6 +254,25 @@ fn track_check_loads_everything_and_names_a_start_pose_out_of_view() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(3), "{err}");
     assert!(err.contains("warning: object 'teddy'") && err.contains("given as object_from_camera"), "{err}");
+    // The live tracker says so too at start-up (and runs).
+    let tag = format!("mrsmap_check_{}", std::process::id());
+    let services: Vec<String> = ["cam", "poses", "det"].iter().map(|s| format!("{tag}/{s}")).collect();
+    let out = mrsmap(&[
+        "track",
+        "--config",
+        path_str(&path),
+        "--idle-timeout",
+        "0.2",
+        "--camera-service",
+        &services[0],
+        "--poses-service",
+        &services[1],
+        "--detections-service",
+        &services[2],
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(err.contains("tracker: warning: object 'teddy'") && err.contains("tracker: ready"), "{err}");
     // A model that is not there: the tracker would not start.
     let path = dir.join("missing.toml");
     std::fs::write(&path, absolute.replace("teddy.mrsm", "no_such.mrsm")).expect("config");

@@ -8,7 +8,9 @@
 use super::affinity;
 use super::tracking::{load_models, tracker_for};
 use crate::geometry::Pose;
+use crate::io::ipc::FrameSize;
 use crate::io::tracker_config::TrackerConfig;
+use crate::tracking::ObjectModel;
 use anyhow::Result;
 use nalgebra::{Point3, Vector3};
 
@@ -51,17 +53,17 @@ pub fn check(config: &TrackerConfig) -> Result<CheckReport> {
             p.num_levels,
             p.finest_resolution_m
         ));
-        let mean = Point3::from(*model.extent.mean());
-        let centre = o.camera_from_object * mean;
+        let centre = o.camera_from_object * Point3::from(*model.extent.mean());
         report.lines.push(format!("  starts with its centre at {}", describe_position(&centre.coords)));
-        if let Some(why) = start_pose_problem(&o.camera_from_object, &mean) {
-            report.warnings.push(format!("object '{}': {why}", o.name));
-        }
     }
+    report.warnings = start_pose_warnings(config, &models.objects);
     let tracker = tracker_for(config, models.objects, width as usize, height as usize)?;
     report.lines.push(format!(
-        "frames: {} ({width}×{height}) from {}; poses on {}; detections from {} (ignored after {:.1} s)",
-        if height == 480 { "VGA" } else { "QVGA" },
+        "frames: {} ({width}×{height}) from {}; poses on {}; detections from {} (older than {:.1} s ignored)",
+        match config.frame_size {
+            FrameSize::Vga => "VGA",
+            FrameSize::Qvga => "QVGA",
+        },
         config.frame_size.service(&config.camera_service),
         config.poses_service,
         config.detections_service,
@@ -80,6 +82,20 @@ pub fn check(config: &TrackerConfig) -> Result<CheckReport> {
         tracker.len()
     ));
     Ok(report)
+}
+
+/// For each object whose configured start pose puts it out of a camera's view, why
+/// (what the live tracker says at start-up, and `--check`).
+pub fn start_pose_warnings(config: &TrackerConfig, models: &[ObjectModel]) -> Vec<String> {
+    config
+        .objects
+        .iter()
+        .zip(models)
+        .filter_map(|(o, model)| {
+            let why = start_pose_problem(&o.camera_from_object, &Point3::from(*model.extent.mean()))?;
+            Some(format!("object '{}': {why}", o.name))
+        })
+        .collect()
 }
 
 /// `(x, y, z)` in the camera's optical frame, its range and bearing in words.
