@@ -134,6 +134,9 @@ pub fn run(config: &TrackerConfig, job: &ReplayJob) -> Result<ReplaySummary> {
         )
     });
     let LoadedModels { objects: models, world_from_model } = models?;
+    for warning in super::tracker_check::start_pose_warnings(config, &models) {
+        eprintln!("warning: {warning}");
+    }
     // Written next to the target and renamed when finished, also after an error, so
     // the poses computed before it are kept.
     let partial = out.as_deref().map(crate::io::atomic::partial_path);
