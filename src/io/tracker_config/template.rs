@@ -134,7 +134,8 @@ fn sections() -> Vec<(&'static str, &'static [&'static str], Vec<Key>)> {
                         "Where the object is expected when tracking starts: the pose of the object frame in the",
                         "camera's optical frame (x right, y down, z forward), tx ty tz (m) qx qy qz qw.",
                         "This one is the teddy in the first frame of tests/data/fr3_teddy_8 (from the TUM",
-                        "ground truth and the model's world_from_model).",
+                        "ground truth and the model's world_from_model). `mrsmap track --check` says where a",
+                        "start pose puts its object, and warns when that is out of the camera's view.",
                     ],
                 ),
                 key(
