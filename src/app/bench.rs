@@ -319,7 +319,7 @@ pub fn tracking_ms(
     // thread of its own. The models load on that pool too.
     let timed = || -> Result<Vec<(f64, f64)>> {
         let (pool, _) = super::dataset::thread_pool_on_this_thread(job.threads, config.pin_threads)?;
-        let LoadedTracker { mut tracker, world_from_model } =
+        let LoadedTracker { mut tracker, world_from_model, .. } =
             load_tracker(config, &pool, cam.width as usize, cam.height as usize)?;
         let tracker = &mut tracker;
         let mut out = StepOutput::new(tracker.len());

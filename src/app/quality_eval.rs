@@ -117,7 +117,7 @@ pub fn run(config: &TrackerConfig, job: &QualityJob) -> Result<(Reference, Vec<T
     judged.params.min_quality_initialise = 0.0;
     judged.params.max_free_space = 1.0;
     let pool = thread_pool(config.threads)?;
-    let LoadedTracker { mut tracker, world_from_model } =
+    let LoadedTracker { mut tracker, world_from_model, .. } =
         load_tracker(&judged, &pool, cam.width as usize, cam.height as usize)?;
     let world_from_model = world_from_model[0];
     let mut out = StepOutput::new(tracker.len());

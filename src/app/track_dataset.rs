@@ -7,7 +7,7 @@ use super::interrupt::{Interrupted, Stop};
 use super::overlay::{ModelPoints, draw};
 use super::poses_client::{object_trajectory_header, object_trajectory_path};
 use super::report::{both_written, percentile, progress_bar, write_or_rescue};
-use super::tracking::{StepOutput, Workers, invalid_frame, load_models, track_frame, tracker_for};
+use super::tracking::{LoadedTracker, StepOutput, Workers, invalid_frame, load_tracker, track_frame};
 use crate::frame::RgbdFrame;
 use crate::geometry::Pose;
 use crate::io::camera_file::read_camera;
@@ -152,14 +152,13 @@ pub fn run(config: &TrackerConfig, job: &TrackDatasetJob) -> Result<TrackDataset
     let mut loader = FrameLoader::new(camera, job.qvga);
     let cam = loader.camera();
     let pool = thread_pool(config.threads)?;
-    let models = pool.install(|| load_models(config))?;
+    let LoadedTracker { mut tracker, world_from_model, start_pose_warnings } =
+        load_tracker(config, &pool, cam.width as usize, cam.height as usize)?;
     if !job.start_at_ground_truth {
-        for warning in super::tracker_check::start_pose_warnings(config, &models.objects) {
+        for warning in &start_pose_warnings {
             eprintln!("warning: {warning}");
         }
     }
-    let world_from_model = models.world_from_model;
-    let mut tracker = tracker_for(config, models.objects, cam.width as usize, cam.height as usize)?;
     let gt_at = |stamp_ns: u64| dataset.groundtruth.as_ref().and_then(|g| g.at_stamp_ns(stamp_ns));
     if job.start_at_ground_truth {
         let world_from_camera =

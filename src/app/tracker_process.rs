@@ -11,7 +11,7 @@
 use super::detections::{DetectionCounts, DetectionInbox};
 use super::recorder::{RecordOptions, RecordStats, Recorder};
 use super::report::{RECENT_SAMPLES, log_line, percentile, push_recent};
-use super::tracking::{StepOutput, Workers, invalid_frame, load_models, pose_message, track_frame, tracker_for};
+use super::tracking::{StepOutput, Workers, invalid_frame, load_tracker, pose_message, track_frame};
 use crate::io::ipc::{self, FrameSize, Ipc, IpcError, now_ns};
 use crate::io::tracker_config::TrackerConfig;
 use crate::io::wire::{ObjectPose, RgbdFrameQvga, RgbdFrameVga, WireFrame};
@@ -143,11 +143,11 @@ impl<F: WireFrame> LiveTracker<F> {
         // global pool would keep two idle threads for good), and before this thread joins
         // the tracker's pool: a start whose models fail to load leaves the thread free.
         let loading = super::dataset::thread_pool(config.threads)?;
-        let models = loading.install(|| load_models(config))?;
-        for warning in super::tracker_check::start_pose_warnings(config, &models.objects) {
+        let loaded = load_tracker(config, &loading, F::WIDTH as usize, F::HEIGHT as usize)?;
+        for warning in &loaded.start_pose_warnings {
             log_line(format_args!("tracker: warning: {warning} (`mrsmap track --check` says more)"));
         }
-        let tracker = tracker_for(config, models.objects, F::WIDTH as usize, F::HEIGHT as usize)?;
+        let tracker = loaded.tracker;
         drop(loading); // its threads end here
         // The calling thread joins the pool as worker 0, so that the parallel work it
         // starts each frame is not injected from outside (rayon allocates for that).

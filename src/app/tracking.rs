@@ -17,6 +17,9 @@ pub struct LoadedTracker {
     pub tracker: Tracker,
     /// Each model file's `world_from_model`, in the configuration's order.
     pub world_from_model: Vec<Pose>,
+    /// For each object whose configured start pose puts it out of a camera's view, why
+    /// ([`super::tracker_check::start_pose_warnings`]).
+    pub start_pose_warnings: Vec<String>,
 }
 
 /// Loads every configured model on `pool` (rayon's global pool would otherwise start for
@@ -29,8 +32,9 @@ pub fn load_tracker(
     max_height: usize,
 ) -> Result<LoadedTracker> {
     let models = pool.install(|| load_models(config))?;
+    let start_pose_warnings = super::tracker_check::start_pose_warnings(config, &models.objects);
     let tracker = tracker_for(config, models.objects, max_width, max_height)?;
-    Ok(LoadedTracker { tracker, world_from_model: models.world_from_model })
+    Ok(LoadedTracker { tracker, world_from_model: models.world_from_model, start_pose_warnings })
 }
 
 /// The configured models, loaded and checked, in the configuration's order.

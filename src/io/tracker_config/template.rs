@@ -14,16 +14,18 @@ const COMMENT_COLUMN: usize = 33;
 /// Comment lines longer than this go above their key, not beside it.
 const BESIDE_MAX_CHARS: usize = 70;
 
-/// One key of the file: its name, its value as TOML (`None`: printed commented out,
-/// the default being "absent") and what it does, a line per line of comment.
+/// One key of the file: its name, its value as TOML, whether the line is commented out
+/// (a key whose default is to be absent, shown with an example value) and what it
+/// does, a line per line of comment.
 struct Key {
     name: &'static str,
-    value: Option<String>,
+    value: String,
+    commented_out: bool,
     comment: &'static [&'static str],
 }
 
 fn key(name: &'static str, value: impl TomlValue, comment: &'static [&'static str]) -> Key {
-    Key { name, value: Some(value.toml()), comment }
+    Key { name, value: value.toml(), commented_out: false, comment }
 }
 
 /// A value as TOML writes it.
@@ -83,7 +85,6 @@ const TEDDY_CAMERA_FROM_OBJECT: [f64; 7] = [0.1923, 0.1253, 1.0402, -0.25098, -0
 /// The sections of the file in order: its header line, the comment above it, its keys.
 fn sections() -> Vec<(&'static str, &'static [&'static str], Vec<Key>)> {
     let p = TrackerParams::default();
-    let r = &p.registration;
     vec![
         (
             "[camera]",
@@ -117,7 +118,7 @@ fn sections() -> Vec<(&'static str, &'static [&'static str], Vec<Key>)> {
                 key("max_age_s", DEFAULT_MAX_AGE_S, &["detections from frames older than this are ignored"]),
             ],
         ),
-        ("[tracker]", &[], tracker_keys(&p, r)),
+        ("[tracker]", &[], tracker_keys(&p)),
         (
             "[[object]]",
             &[
@@ -153,16 +154,21 @@ fn sections() -> Vec<(&'static str, &'static [&'static str], Vec<Key>)> {
 }
 
 /// The keys of `[tracker]`.
-fn tracker_keys(p: &TrackerParams, r: &crate::registration::RegistrationParams) -> Vec<Key> {
+fn tracker_keys(p: &TrackerParams) -> Vec<Key> {
     let mut keys = tracking_keys(p);
-    keys.extend(registration_keys(p, r));
+    keys.extend(registration_keys(p));
     keys
 }
 
 /// The keys of `[tracker]` on threads, the scene map and the tracking state.
 fn tracking_keys(p: &TrackerParams) -> Vec<Key> {
     vec![
-        Key { name: "threads", value: None, comment: &["worker threads (absent: one per core the process may use)"] },
+        Key {
+            name: "threads",
+            value: 2usize.toml(),
+            commented_out: true,
+            comment: &["worker threads (absent: one per core the process may use)"],
+        },
         key(
             "pin_threads",
             DEFAULT_PIN_THREADS,
@@ -248,7 +254,8 @@ fn tracking_keys(p: &TrackerParams) -> Vec<Key> {
 }
 
 /// The keys of `[tracker]` on the registration and its covariance (§4).
-fn registration_keys(p: &TrackerParams, r: &crate::registration::RegistrationParams) -> Vec<Key> {
+fn registration_keys(p: &TrackerParams) -> Vec<Key> {
+    let r = &p.registration;
     vec![
         key("lm_max_iterations", r.lm_max_iterations, &["Levenberg–Marquardt iterations at most (§4.2)"]),
         key(
@@ -299,10 +306,10 @@ fn registration_keys(p: &TrackerParams, r: &crate::registration::RegistrationPar
 /// objects' keys have no default, and the text holds one example object.
 pub fn default_tracker_config() -> String {
     let mut out = String::new();
-    comment_lines(&mut out, "", HEADER);
+    comment_lines(&mut out, HEADER);
     for (header, intro, keys) in sections() {
         out.push('\n');
-        comment_lines(&mut out, "", intro);
+        comment_lines(&mut out, intro);
         let _ = writeln!(out, "{header}");
         for k in &keys {
             write_key(&mut out, k);
@@ -311,19 +318,16 @@ pub fn default_tracker_config() -> String {
     out
 }
 
-fn comment_lines(out: &mut String, indent: &str, lines: &[&str]) {
+fn comment_lines(out: &mut String, lines: &[&str]) {
     for line in lines {
-        let _ = writeln!(out, "{indent}# {line}");
+        let _ = writeln!(out, "# {line}");
     }
 }
 
 /// `name = value` with its comment beside it where the two fit before the comment
 /// column and the comment's lines are short, else with the comment above it.
 fn write_key(out: &mut String, k: &Key) {
-    let assignment = match &k.value {
-        Some(v) => format!("{} = {v}", k.name),
-        None => format!("# {} = 2", k.name),
-    };
+    let assignment = format!("{}{} = {}", if k.commented_out { "# " } else { "" }, k.name, k.value);
     let short = k.comment.iter().all(|line| line.chars().count() <= BESIDE_MAX_CHARS);
     if short && assignment.chars().count() < COMMENT_COLUMN {
         let pad = " ".repeat(COMMENT_COLUMN - assignment.chars().count());
@@ -335,7 +339,7 @@ fn write_key(out: &mut String, k: &Key) {
             }
         }
     } else {
-        comment_lines(out, "", k.comment);
+        comment_lines(out, k.comment);
         let _ = writeln!(out, "{assignment}");
     }
 }
