@@ -273,6 +273,13 @@ fn track_check_loads_everything_and_names_a_start_pose_out_of_view() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{err}");
     assert!(err.contains("tracker: warning: object 'teddy'") && err.contains("tracker: ready"), "{err}");
+    // An object registered with the colour term says so.
+    let path = dir.join("colour.toml");
+    std::fs::write(&path, absolute.replace("color_term = false", "color_term = true")).expect("config");
+    let out = mrsmap(&["track", "--config", path_str(&path), "--check"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}");
+    assert!(text.contains("registered with the colour term (luminance std inf, chroma std 0.03)"), "{text}");
     // A model that is not there: the tracker would not start.
     let path = dir.join("missing.toml");
     std::fs::write(&path, absolute.replace("teddy.mrsm", "no_such.mrsm")).expect("config");

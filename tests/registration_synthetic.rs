@@ -208,3 +208,49 @@ fn the_clustered_covariance_covers_eq6_and_grows_with_a_shared_misfit() {
     println!("clustered / Eq. 6 standard deviation (translation): exact {exact:.2}, shared misfit {shared:.2}");
     assert!(exact >= 1.0 && shared > 1.5 * exact, "exact {exact:.2}, shared misfit {shared:.2}");
 }
+
+/// A textured sphere turned about its centre: its shape is the same at every turn, so
+/// Eq. (5) alone cannot see the turn (the registration finds no constraint on it); the
+/// colour term (`RegistrationParams::color_term`, not in the paper) recovers it from
+/// the texture.
+#[test]
+fn the_colour_term_sees_a_turn_that_the_shape_does_not() {
+    use mrsmap::registration::ColorTerm;
+    use mrsmap::synthetic::Mesh;
+    use mrsmap::synthetic::scene::{ColorField, add_sphere};
+    use nalgebra::{Translation3, UnitQuaternion, Vector3};
+    let center = Vector3::new(0.02, -0.03, 0.8);
+    let mut sphere = Mesh::default();
+    add_sphere(&mut sphere, center, 0.15, 0.005, &ColorField::new(&mut Pcg32::new(11), 12));
+    // Turned by 3° about an axis through the centre: model_from_scene is the inverse turn.
+    let about_center = |angle: f64| {
+        let turn = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), angle);
+        Translation3::from(center) * turn * Translation3::from(-center)
+    };
+    let mut turned = sphere.clone();
+    turned.transform(&about_center(3f64.to_radians()));
+    let (model, scene) = (
+        build_map(&render_frame(&sphere, vga(), &Pose::identity())),
+        build_map(&render_frame(&turned, vga(), &Pose::identity())),
+    );
+    let expected = about_center(-3f64.to_radians());
+    let mut ws = RegistrationWorkspace::new(MapCapacity::for_image(640 * 480).nodes);
+    let plain = register(&model, &scene, &Pose::identity(), &RegistrationParams::default(), &mut ws);
+    let with_color = RegistrationParams { color_term: Some(ColorTerm::default()), ..RegistrationParams::default() };
+    let colored = register(&model, &scene, &Pose::identity(), &with_color, &mut ws).expect("registers with colour");
+    // The error of the turn, and where the estimate puts the sphere's centre.
+    let (_, deg) = pose_error(&colored.model_from_scene, &expected);
+    let c = nalgebra::Point3::from(center);
+    let t = (colored.model_from_scene * c - expected * c).norm();
+    println!("with colour: centre off by {:.3} mm, turn by {:.3} deg", t * 1e3, deg);
+    match plain {
+        Err(RegistrationError::Degenerate { rotation_std_rad, .. }) => assert!(rotation_std_rad > 0.02),
+        Ok(r) => {
+            let (_, plain_deg) = pose_error(&r.model_from_scene, &expected);
+            println!("without colour: {plain_deg:.3} deg off");
+            assert!(plain_deg > 1.5, "without colour the turn is not seen: {plain_deg:.3} deg off");
+        }
+        Err(e) => panic!("without colour: {e}"),
+    }
+    assert!(t < 1e-3 && deg < 0.5, "with colour: centre off by {:.3} mm, turn by {:.3} deg", t * 1e3, deg);
+}

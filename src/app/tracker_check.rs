@@ -53,6 +53,12 @@ pub fn check(config: &TrackerConfig) -> Result<CheckReport> {
             p.num_levels,
             p.finest_resolution_m
         ));
+        if let Some(c) = o.color_term {
+            report.lines.push(format!(
+                "  registered with the colour term (luminance std {}, chroma std {})",
+                c.luminance_std, c.chroma_std
+            ));
+        }
         let centre = o.camera_from_object * Point3::from(*model.extent.mean());
         report.lines.push(format!("  starts with its centre at {}", describe_position(&centre.coords)));
     }

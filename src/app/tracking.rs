@@ -61,6 +61,7 @@ pub fn load_models(config: &TrackerConfig) -> Result<LoadedModels> {
             extent,
             initial_camera_from_object: o.camera_from_object,
             search: o.search,
+            color_term: o.color_term,
         });
     }
     Ok(loaded)

@@ -19,6 +19,7 @@
 //! camera_from_object = [0.1, 0.2, 0.9, 0.0, 0.0, 0.0, 1.0]   # tx ty tz qx qy qz qw
 //! search_translation_m = 0.05              # optional
 //! search_yaw_deg = 20.0                    # optional
+//! color_term = false                       # optional: colour residuals too (not in the paper)
 //! ```
 
 mod template;
@@ -28,6 +29,7 @@ pub use template::default_tracker_config;
 use super::ipc::FrameSize;
 use crate::geometry::Pose;
 use crate::geometry::se3::unit_pose_from_xyzw;
+use crate::registration::ColorTerm;
 use crate::tracking::{CovarianceModel, SearchRegion, TrackerParams};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
@@ -65,6 +67,8 @@ pub struct ObjectConfig {
     pub camera_from_object: Pose,
     /// Where else to look when (re-)initialising.
     pub search: SearchRegion,
+    /// The registration's colour term for this object, if on ([`ColorTerm`]).
+    pub color_term: Option<ColorTerm>,
 }
 
 /// The checked configuration.
@@ -216,6 +220,10 @@ struct RawObject {
     search_translation_m: f64,
     #[serde(default)]
     search_yaw_deg: f64,
+    #[serde(default)]
+    color_term: bool,
+    color_luminance_std: Option<f64>,
+    color_chroma_std: Option<f64>,
 }
 
 /// Parses a configuration; `origin` names it in errors and resolves relative model paths.
@@ -317,13 +325,39 @@ fn object(o: RawObject, base: &Path) -> Result<ObjectConfig, String> {
     if o.name.is_empty() || o.name.len() > 31 {
         return Err(format!("object name {:?} must have 1 to 31 bytes", o.name));
     }
+    let color_term = color_term(&o)?;
     let model = if o.model.is_absolute() { o.model } else { base.join(o.model) };
     Ok(ObjectConfig {
         name: o.name,
         model,
         camera_from_object,
         search: SearchRegion { translation_m: o.search_translation_m, yaw_rad: o.search_yaw_deg.to_radians() },
+        color_term,
     })
+}
+
+/// The object's colour term: its standard deviations checked, and set only with it on.
+fn color_term(o: &RawObject) -> Result<Option<ColorTerm>, String> {
+    let stds = [("color_luminance_std", o.color_luminance_std), ("color_chroma_std", o.color_chroma_std)];
+    for (name, value) in stds {
+        match value {
+            Some(v) if v.is_nan() || v <= 0.0 => {
+                return Err(format!(
+                    "object {}: {name} = {v}: expected a standard deviation > 0 (inf: that channel is not compared)",
+                    o.name
+                ));
+            }
+            Some(_) if !o.color_term => {
+                return Err(format!("object {}: {name} is set but color_term is not true", o.name));
+            }
+            _ => {}
+        }
+    }
+    let d = ColorTerm::default();
+    Ok(o.color_term.then(|| ColorTerm {
+        luminance_std: o.color_luminance_std.unwrap_or(d.luminance_std),
+        chroma_std: o.color_chroma_std.unwrap_or(d.chroma_std),
+    }))
 }
 
 /// Reads a configuration.
@@ -360,6 +394,29 @@ mod tests {
             let text = GOOD.replace("[camera]", &format!("[detections]\n{bad}\n[camera]"));
             let e = parse_tracker_config(&text, p).unwrap_err().to_string();
             assert!(e.contains("detections."), "{bad}: {e}");
+        }
+    }
+
+    #[test]
+    fn the_colour_term_is_set_per_object_and_its_deviations_checked() {
+        let p = Path::new("t.toml");
+        assert_eq!(parse_tracker_config(GOOD, p).expect("valid").objects[0].color_term, None);
+        let on = format!("{GOOD}color_term = true\n");
+        assert_eq!(parse_tracker_config(&on, p).expect("valid").objects[0].color_term, Some(ColorTerm::default()));
+        let set = format!("{on}color_luminance_std = 0.1\ncolor_chroma_std = 0.04\n");
+        let expected = ColorTerm { luminance_std: 0.1, chroma_std: 0.04 };
+        assert_eq!(parse_tracker_config(&set, p).expect("valid").objects[0].color_term, Some(expected));
+        let set = format!("{on}color_luminance_std = inf\n");
+        let expected = ColorTerm { luminance_std: f64::INFINITY, ..ColorTerm::default() };
+        assert_eq!(parse_tracker_config(&set, p).expect("valid").objects[0].color_term, Some(expected));
+        for (bad, named) in [
+            (format!("{on}color_chroma_std = 0"), "color_chroma_std = 0"),
+            (format!("{on}color_luminance_std = -0.1"), "color_luminance_std = -0.1"),
+            (format!("{on}color_luminance_std = nan"), "color_luminance_std = NaN"),
+            (format!("{GOOD}color_chroma_std = 0.04"), "color_chroma_std is set but color_term is not true"),
+        ] {
+            let e = parse_tracker_config(&bad, p).unwrap_err().to_string();
+            assert!(e.contains(named) && e.contains("object teddy"), "{bad}: {e}");
         }
     }
 

@@ -36,6 +36,42 @@ pub(crate) struct TermInput {
     pub c: Matrix3<f64>,
     /// `A = I − ∂μₘ/∂p`.
     pub a: Matrix3<f64>,
+    /// The colour residual, with the colour term ([`ColorTerm`](super::ColorTerm)).
+    pub color: Option<ColorResidual>,
+}
+
+/// The colour term of one association: `d = (c_m(p) − c_s) / σ` per channel and
+/// `K = ∂d/∂p` (the interpolation's colour Jacobian, scaled alike).
+///
+/// Its cost is `dᵀd` and its Jacobian `J = ∂d/∂δ = K [I, −[p]×]` (columns `K eᵢ` and
+/// `K (eₖ × p)`). LM (Eq. 5's half) adds `½dᵀd`, `g = Jᵀd`, `H = JᵀJ`; Newton (Eq. 4's
+/// scale) adds `dᵀd`, `2Jᵀd` and the Gauss–Newton `2JᵀJ` (the second derivatives of the
+/// interpolation are neglected, as for the position term).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct ColorResidual {
+    /// Scaled residual.
+    pub d: Vector3<f64>,
+    /// Its Jacobian with respect to the transformed scene mean `p`.
+    pub k: Matrix3<f64>,
+}
+
+impl ColorResidual {
+    /// `dᵀd`.
+    #[inline]
+    pub(crate) fn cost(&self) -> f64 {
+        self.d.dot(&self.d)
+    }
+
+    /// `(dᵀd, Jᵀd, JᵀJ)` at the transformed scene mean `p`.
+    #[inline]
+    pub(crate) fn system(&self, p: &Vector3<f64>) -> (f64, Vector6<f64>, Matrix6<f64>) {
+        let mut j = nalgebra::Matrix3x6::zeros();
+        j.fixed_view_mut::<3, 3>(0, 0).copy_from(&self.k);
+        for k in 0..3 {
+            j.set_column(3 + k, &(self.k * gen_vec(k, p)));
+        }
+        (self.cost(), j.transpose() * self.d, j.transpose() * j)
+    }
 }
 
 /// The symmetric 3×3 matrix with upper triangle `xx, xy, xz, yy, yz, zz`.
@@ -258,6 +294,7 @@ mod tests {
             p,
             c: r * cov_s * r.transpose(),
             a: Matrix3::identity() - m,
+            color: None,
         }
     }
 
@@ -316,6 +353,34 @@ mod tests {
                     prop_assert!((num_h - h[(i, j)]).abs() < 1e-4 * scale, "hess {i},{j}: {num_h} vs {}", h[(i, j)]);
                 }
             }
+        }
+
+        #[test]
+        fn the_colour_term_s_gradient_and_hessian_match_finite_differences(
+            c in case(),
+            d0 in prop::array::uniform3(-2.0f64..2.0),
+            k in prop::array::uniform9(-30.0f64..30.0),
+        ) {
+            // A colour that changes linearly with p, as the blend does within a cell:
+            // d(p) = d₀ + K (p − p₀).
+            let k = Matrix3::from_row_slice(&k);
+            let p0 = term_at(&Vector6::zeros(), &c).p;
+            let residual = |delta: &Vector6<f64>| {
+                let p = term_at(delta, &c).p;
+                ColorResidual { d: Vector3::from(d0) + k * (p - p0), k }
+            };
+            let (e0, g, h) = residual(&Vector6::zeros()).system(&p0);
+            prop_assert!((e0 - Vector3::from(d0).norm_squared()).abs() < 1e-12);
+            let eps = 1e-6;
+            let mut j = nalgebra::Matrix3x6::zeros();
+            for i in 0..6 {
+                let (a, b) = (residual(&unit(i, eps)), residual(&(-unit(i, eps))));
+                let num = 0.5 * (a.cost() - b.cost()) / (2.0 * eps);
+                prop_assert!((num - g[i]).abs() < 1e-5 * (1.0 + g[i].abs()), "grad {i}: {num} vs {}", g[i]);
+                j.set_column(i, &((a.d - b.d) / (2.0 * eps)));
+            }
+            let num_h = j.transpose() * j;
+            prop_assert!((num_h - h).norm() < 1e-4 * (1.0 + h.norm()));
         }
 
         #[test]

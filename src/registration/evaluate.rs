@@ -4,7 +4,9 @@
 //! slot, and the slots are added in index order: the result is bit-identical for any
 //! number of threads.
 
-use super::cost::{TermInput, likelihood_cost, likelihood_term, lm_term, mahalanobis, rotate_symmetric, symmetric};
+use super::cost::{
+    ColorResidual, TermInput, likelihood_cost, likelihood_term, lm_term, mahalanobis, rotate_symmetric, symmetric,
+};
 use super::params::RegistrationParams;
 use super::workspace::{Association, NODE_CHUNK, Partial};
 use crate::geometry::Pose;
@@ -43,6 +45,8 @@ pub(crate) struct SumInput<'a> {
     pub interpolate: bool,
     /// `a · res²` per level.
     pub regularization: [f64; MAX_LEVELS],
+    /// With the colour term ([`ColorTerm`]): `1/σ` of the `L`, `α`, `β` residuals.
+    pub color_scale: Option<Vector3<f64>>,
 }
 
 impl<'a> SumInput<'a> {
@@ -65,6 +69,9 @@ impl<'a> SumInput<'a> {
             translation: pose.translation.vector,
             interpolate,
             regularization,
+            color_scale: params
+                .color_term
+                .map(|c| Vector3::new(1.0 / c.luminance_std, 1.0 / c.chroma_std, 1.0 / c.chroma_std)),
         }
     }
 
@@ -80,14 +87,19 @@ impl<'a> SumInput<'a> {
         let p = r * ss.mean.cast::<f64>() + self.translation;
         let c = rotate_symmetric(r, &ss.cov()) + reg;
         let res = self.model.resolution(level);
-        let m = if self.interpolate && with_jacobian {
-            interpolate::<true>(self.model, a.model_node, a.model_surfel, &p, res)
-        } else if self.interpolate {
-            interpolate::<false>(self.model, a.model_node, a.model_surfel, &p, res)
-        } else {
-            Interpolated::of(ms)
+        let (node, surfel) = (a.model_node, a.model_surfel);
+        let m = match (self.interpolate, with_jacobian, self.color_scale.is_some()) {
+            (false, _, _) => Interpolated::of(ms),
+            (true, true, false) => interpolate::<true, false>(self.model, node, surfel, &p, res),
+            (true, false, false) => interpolate::<false, false>(self.model, node, surfel, &p, res),
+            (true, true, true) => interpolate::<true, true>(self.model, node, surfel, &p, res),
+            (true, false, true) => interpolate::<false, true>(self.model, node, surfel, &p, res),
         };
-        TermInput { model_mean: m.mean, model_cov: m.cov + reg, p, c, a: Matrix3::identity() - m.jacobian }
+        let color = self.color_scale.map(|scale| ColorResidual {
+            d: (m.color - ss.color.cast::<f64>()).component_mul(&scale),
+            k: Matrix3::from_diagonal(&scale) * m.color_jacobian,
+        });
+        TermInput { model_mean: m.mean, model_cov: m.cov + reg, p, c, a: Matrix3::identity() - m.jacobian, color }
     }
 
     /// Adds the term of one association to `acc`.
@@ -105,14 +117,24 @@ impl<'a> SumInput<'a> {
     }
 }
 
-/// Adds `what` of one term to `acc`.
+/// Adds `what` of one term to `acc` (with its colour term, if it has one).
 #[inline(always)]
 fn add(t: &TermInput, what: Sum, acc: &mut Partial) {
-    let ok = match what {
-        Sum::LmCost => mahalanobis(t).map(|e| acc.cost += 0.5 * e),
-        Sum::LikelihoodCost => likelihood_cost(t).map(|e| acc.cost += e),
-        Sum::LmSystem => lm_term(t).map(|(e, g, h)| acc.add_term(0.5 * e, &g, &h)),
-        Sum::LikelihoodSystem => likelihood_term(t).map(|(e, g, h)| acc.add_term(e, &g, &h)),
+    let ok = match (what, &t.color) {
+        (Sum::LmCost, None) => mahalanobis(t).map(|e| acc.cost += 0.5 * e),
+        (Sum::LikelihoodCost, None) => likelihood_cost(t).map(|e| acc.cost += e),
+        (Sum::LmSystem, None) => lm_term(t).map(|(e, g, h)| acc.add_term(0.5 * e, &g, &h)),
+        (Sum::LikelihoodSystem, None) => likelihood_term(t).map(|(e, g, h)| acc.add_term(e, &g, &h)),
+        (Sum::LmCost, Some(c)) => mahalanobis(t).map(|e| acc.cost += 0.5 * (e + c.cost())),
+        (Sum::LikelihoodCost, Some(c)) => likelihood_cost(t).map(|e| acc.cost += e + c.cost()),
+        (Sum::LmSystem, Some(c)) => lm_term(t).map(|(e, g, h)| {
+            let (ec, gc, hc) = c.system(&t.p);
+            acc.add_term(0.5 * (e + ec), &(g + gc), &(h + hc));
+        }),
+        (Sum::LikelihoodSystem, Some(c)) => likelihood_term(t).map(|(e, g, h)| {
+            let (ec, gc, hc) = c.system(&t.p);
+            acc.add_term(e + ec, &(g + gc * 2.0), &(h + hc * 2.0));
+        }),
     };
     if ok.is_some() {
         acc.count += 1;
@@ -126,11 +148,22 @@ pub(crate) struct Interpolated {
     pub cov: Matrix3<f64>,
     /// `∂mean/∂p` (zero for a single surfel).
     pub jacobian: Matrix3<f64>,
+    /// The mean colour `[L, α, β]`, blended like the mean when asked for (else the
+    /// matched surfel's).
+    pub color: Vector3<f64>,
+    /// `∂color/∂p` (zero for a single surfel, or when not asked for).
+    pub color_jacobian: Matrix3<f64>,
 }
 
 impl Interpolated {
     fn of(s: &Surfel) -> Self {
-        Interpolated { mean: s.mean.cast::<f64>(), cov: s.cov(), jacobian: Matrix3::zeros() }
+        Interpolated {
+            mean: s.mean.cast::<f64>(),
+            cov: s.cov(),
+            jacobian: Matrix3::zeros(),
+            color: s.color.cast::<f64>(),
+            color_jacobian: Matrix3::zeros(),
+        }
     }
 }
 
@@ -142,8 +175,10 @@ impl Interpolated {
 /// holds a usable surfel, the matched surfel itself is returned. The Jacobian of the
 /// blended mean is `Σ (μᵢ − μ) ∇wᵢᵀ / Σ wᵢ = (Σ μᵢ∇wᵢᵀ − μ Σ∇wᵢᵀ) / Σ wᵢ`, summed in
 /// the same pass as the blend, if `JACOBIAN` (else it is left zero: the blended mean
-/// and covariance are the same either way, sum for sum).
-pub(crate) fn interpolate<const JACOBIAN: bool>(
+/// and covariance are the same either way, sum for sum). With `COLOR` the colour is
+/// blended with the same weights (and its Jacobian formed likewise if `JACOBIAN`), for
+/// the colour term ([`ColorTerm`](super::ColorTerm)); without, it is the matched surfel's.
+pub(crate) fn interpolate<const JACOBIAN: bool, const COLOR: bool>(
     model: &SurfelMap,
     node: u32,
     surfel: u32,
@@ -170,6 +205,7 @@ pub(crate) fn interpolate<const JACOBIAN: bool>(
     // `Surfel::cov_packed`), the same sums as the full matrix's.
     let (mut sw, mut mean, mut cov) = (0.0, Vector3::zeros(), [0.0f64; 6]);
     let (mut mean_grad, mut grad_sum) = (Matrix3::zeros(), Vector3::zeros());
+    let (mut color, mut color_grad) = (Vector3::zeros(), Matrix3::zeros());
     for (i, dx) in [0, step.x].into_iter().enumerate() {
         for (j, dy) in [0, step.y].into_iter().enumerate() {
             for (k, dz) in [0, step.z].into_iter().enumerate() {
@@ -186,10 +222,16 @@ pub(crate) fn interpolate<const JACOBIAN: bool>(
                     for (c, &v) in cov.iter_mut().zip(&sf.cov_packed) {
                         *c += v as f64 * w;
                     }
+                    if COLOR {
+                        color += sf.color.cast::<f64>() * w;
+                    }
                     if JACOBIAN {
                         let grad = Vector3::new(gx[i] * wy[j] * wz[k], wx[i] * gy[j] * wz[k], wx[i] * wy[j] * gz[k]);
                         mean_grad += mu * grad.transpose();
                         grad_sum += grad;
+                        if COLOR {
+                            color_grad += sf.color.cast::<f64>() * grad.transpose();
+                        }
                     }
                 }
             }
@@ -202,7 +244,14 @@ pub(crate) fn interpolate<const JACOBIAN: bool>(
     let mean = mean * inv_sw;
     let jacobian = if JACOBIAN { (mean_grad - mean * grad_sum.transpose()) * inv_sw } else { Matrix3::zeros() };
     let [xx, xy, xz, yy, yz, zz] = cov.map(|c| c * inv_sw);
-    Interpolated { mean, cov: symmetric(xx, xy, xz, yy, yz, zz), jacobian }
+    let (color, color_jacobian) = if COLOR {
+        let color = color * inv_sw;
+        let jacobian = if JACOBIAN { (color_grad - color * grad_sum.transpose()) * inv_sw } else { Matrix3::zeros() };
+        (color, jacobian)
+    } else {
+        (surfels[surfel as usize].color.cast::<f64>(), Matrix3::zeros())
+    };
+    Interpolated { mean, cov: symmetric(xx, xy, xz, yy, yz, zz), jacobian, color, color_jacobian }
 }
 
 /// The slot of every (level, chunk) pair: levels from `finest` to `coarsest`, chunks of

@@ -26,7 +26,7 @@ mod wall_tests;
 mod workspace;
 
 pub use likelihood::{MatchScore, MatchScratch, match_score};
-pub use params::{RegistrationParams, RegistrationParamsError};
+pub use params::{ColorTerm, RegistrationParams, RegistrationParamsError};
 pub use workspace::RegistrationWorkspace;
 
 use crate::geometry::Pose;

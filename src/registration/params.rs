@@ -87,6 +87,35 @@ pub struct RegistrationParams {
     pub max_translation_std_m: f64,
     /// Likewise for rotation (rad).
     pub max_rotation_std_rad: f64,
+    /// A colour residual beside Eq. (5) and Eq. (4): not in the paper, off by default
+    /// ([`ColorTerm`]).
+    pub color_term: Option<ColorTerm>,
+}
+
+/// The colour term, an extension of the paper's registration: each association also
+/// compares the scene surfel's mean colour with the model's colour interpolated at the
+/// transformed scene mean (the same trilinear blend as the model mean, §4.3), as the
+/// residual `(c_m(p) − c_s) / σ` per channel, summed in LM and Newton with the position
+/// terms. Eq. (5) and Eq. (4) compare positions only, so a turn about a symmetry axis
+/// of the shape (a bottle about its axis) is not held by them; the colour's change
+/// across the model's cells (a label) holds it. Only the colour's spatial gradient
+/// (the blend's Jacobian) moves the pose: where the model's colour is uniform the term
+/// adds a constant. A channel with an infinite standard deviation is not compared.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ColorTerm {
+    /// Standard deviation of the luminance residual (`L`, as the gates measure it);
+    /// infinite by default: luminance is what shading and exposure change between views.
+    pub luminance_std: f64,
+    /// Standard deviation of each chroma residual (`α`, `β`).
+    pub chroma_std: f64,
+}
+
+impl Default for ColorTerm {
+    /// Chroma only, σ 0.03: on rendered objects as good as with luminance, and less
+    /// harm on real frames (docs/evaluation.md, "The colour term").
+    fn default() -> Self {
+        ColorTerm { luminance_std: f64::INFINITY, chroma_std: 0.03 }
+    }
 }
 
 impl Default for RegistrationParams {
@@ -116,6 +145,7 @@ impl Default for RegistrationParams {
             min_overlap: 0.5,
             max_translation_std_m: 0.01,
             max_rotation_std_rad: 0.02,
+            color_term: None,
         }
     }
 }
@@ -159,6 +189,15 @@ impl RegistrationParams {
         {
             if !(value > 0.0 && value.is_finite()) {
                 return err(name, value, "> 0");
+            }
+        }
+        if let Some(c) = self.color_term {
+            for (name, value) in
+                [("color_term.luminance_std", c.luminance_std), ("color_term.chroma_std", c.chroma_std)]
+            {
+                if value.is_nan() || value <= 0.0 {
+                    return err(name, value, "> 0 (inf: not compared)");
+                }
             }
         }
         if self.min_associations < 6 {

@@ -2,7 +2,8 @@
 //! results is exact (a fresh pass after earlier passes, whose results it reuses where
 //! they provably still hold, pairs every scene node as a pass from scratch does), and
 //! the trilinear interpolation of model surfels (§4.3) blends the same mean and
-//! covariance with and without its Jacobian, which matches finite differences; and
+//! covariance with and without its Jacobian, which matches finite differences (as does
+//! the blended colour's, for the colour term); and
 //! registrations that start their searches from the last one's matches give the same
 //! results as registrations without them.
 
@@ -130,26 +131,46 @@ fn the_interpolated_mean_s_jacobian_matches_finite_differences_and_a_cost_needs_
     let params = RegistrationParams::default();
     let mut passes = Passes::new(&scene, &params);
     passes.associate(&model, &scene, &Pose::identity(), true);
-    let (mut checked, mut agree) = (0, 0);
+    let (mut checked, mut agree, mut color_agree, mut color_moves) = (0, 0, 0, 0);
     for a in passes.assoc.iter().filter(|a| a.is_matched()) {
         let s = &scene.surfels()[a.scene_surfel as usize];
         let res = model.resolution(s.level as usize);
-        let at = |p: &nalgebra::Vector3<f64>| interpolate::<true>(&model, a.model_node, a.model_surfel, p, res);
+        let at = |p: &nalgebra::Vector3<f64>| interpolate::<true, false>(&model, a.model_node, a.model_surfel, p, res);
+        let colored =
+            |p: &nalgebra::Vector3<f64>| interpolate::<true, true>(&model, a.model_node, a.model_surfel, p, res);
         let p = s.mean.cast::<f64>();
-        let (full, cost_only) = (at(&p), interpolate::<false>(&model, a.model_node, a.model_surfel, &p, res));
+        let (full, cost_only) = (at(&p), interpolate::<false, false>(&model, a.model_node, a.model_surfel, &p, res));
         assert_eq!((full.mean, full.cov), (cost_only.mean, cost_only.cov));
         assert_eq!(cost_only.jacobian, nalgebra::Matrix3::zeros());
+        // Without COLOR the colour is the matched surfel's; with it, the blend changes
+        // nothing else, and its cost-only form has the same colour and no Jacobian.
+        let matched = model.surfels()[a.model_surfel as usize].color.cast::<f64>();
+        assert_eq!((full.color, full.color_jacobian), (matched, nalgebra::Matrix3::zeros()));
+        let (with_color, color_cost) =
+            (colored(&p), interpolate::<false, true>(&model, a.model_node, a.model_surfel, &p, res));
+        assert_eq!((with_color.mean, with_color.cov, with_color.jacobian), (full.mean, full.cov, full.jacobian));
+        assert_eq!((color_cost.color, color_cost.color_jacobian), (with_color.color, nalgebra::Matrix3::zeros()));
         // Central differences, a thousandth of a cell: the blend is piecewise smooth, so
         // a step that crosses a cell centre may disagree; nearly all must not.
         let h = 1e-3 * res;
-        let numeric = nalgebra::Matrix3::from_fn(|i, j| {
-            let e = nalgebra::Vector3::ith(j, h);
-            (at(&(p + e)).mean[i] - at(&(p - e)).mean[i]) / (2.0 * h)
-        });
+        let numeric = |f: &dyn Fn(&nalgebra::Vector3<f64>) -> nalgebra::Vector3<f64>| {
+            nalgebra::Matrix3::from_fn(|i, j| {
+                let e = nalgebra::Vector3::ith(j, h);
+                (f(&(p + e))[i] - f(&(p - e))[i]) / (2.0 * h)
+            })
+        };
+        let close = |n: nalgebra::Matrix3<f64>, j: nalgebra::Matrix3<f64>| n - j;
         checked += 1;
-        agree += usize::from((numeric - full.jacobian).amax() <= 1e-6 + 1e-4 * full.jacobian.amax());
+        let mean_error = close(numeric(&|q| at(q).mean), full.jacobian);
+        agree += usize::from(mean_error.amax() <= 1e-6 + 1e-4 * full.jacobian.amax());
+        let color_error = close(numeric(&|q| colored(q).color), with_color.color_jacobian);
+        color_agree += usize::from(color_error.amax() <= 1e-6 + 1e-4 * with_color.color_jacobian.amax());
+        color_moves += usize::from(with_color.color_jacobian.amax() > 0.05);
     }
     assert!(checked > 500 && agree as f64 >= 0.95 * checked as f64, "{agree} of {checked} Jacobians agree");
+    assert!(color_agree as f64 >= 0.95 * checked as f64, "{color_agree} of {checked} colour Jacobians agree");
+    // The wall's colour ramp: the blended colour changes along it.
+    assert!(color_moves as f64 >= 0.5 * checked as f64, "{color_moves} of {checked} colours change with p");
 }
 
 #[test]

@@ -4,7 +4,7 @@ use super::extent::ModelExtent;
 use super::free_space::FreeSpaceProbe;
 use crate::geometry::Pose;
 use crate::map::SurfelMap;
-use crate::registration::{MatchScratch, RegistrationParams, RegistrationWorkspace};
+use crate::registration::{ColorTerm, MatchScratch, RegistrationParams, RegistrationWorkspace};
 use nalgebra::{Matrix6, Translation3, UnitQuaternion, Vector3};
 
 /// What a tracked object is doing, as published.
@@ -112,6 +112,9 @@ pub struct ObjectModel {
     pub initial_camera_from_object: Pose,
     /// Where else to look.
     pub search: SearchRegion,
+    /// The registration's colour term for this object (off: `None`, the paper's
+    /// registration).
+    pub color_term: Option<ColorTerm>,
 }
 
 /// The re-initialisation hypotheses (`object_from_camera`): the initial pose first,

@@ -9,7 +9,9 @@ use crate::frame::RgbdFrame;
 use crate::geometry::Pose;
 use crate::geometry::se3::{invert_left_covariance, left_covariance_to_ros};
 use crate::map::{BuildReport, MapBuilder, MapCapacity, MapError, MapParams, MapParamsError, SurfelMap};
-use crate::registration::{MatchScratch, Registration, RegistrationError, RegistrationWorkspace, register};
+use crate::registration::{
+    MatchScratch, Registration, RegistrationError, RegistrationParams, RegistrationWorkspace, register,
+};
 use thiserror::Error;
 
 /// Why a tracker could not be set up.
@@ -80,7 +82,10 @@ impl Tracker {
             let object_from_camera = m.initial_camera_from_object.inverse();
             let radius_m = m.map.surfels().iter().filter(|s| s.usable()).map(|s| s.mean.norm()).fold(0.0f32, f32::max);
             objects.push(TrackedObject {
-                registration: params.registration_for(f64::from(radius_m)),
+                registration: RegistrationParams {
+                    color_term: m.color_term,
+                    ..params.registration_for(f64::from(radius_m))
+                },
                 hypotheses: hypotheses(&m.initial_camera_from_object, &m.search),
                 near_last: Vec::with_capacity(hypothesis_count(&m.search)),
                 search: m.search,

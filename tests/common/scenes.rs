@@ -63,6 +63,7 @@ pub fn object_model_in(
         extent,
         initial_camera_from_object: first_camera_from_object,
         search: SearchRegion { translation_m: 0.03, yaw_rad: 0.1 },
+        color_term: None,
     }
 }
 
