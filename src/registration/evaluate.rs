@@ -76,9 +76,10 @@ impl<'a> SumInput<'a> {
     }
 
     /// The inputs of one association; its Jacobian `a` only `with_jacobian` (a cost
-    /// alone does not read it: with interpolation it is the dearer half of the blend).
+    /// alone does not read it: with interpolation it is the dearer half of the blend);
+    /// its colour residual only with `COLOR` (which needs `color_scale`).
     #[inline]
-    pub(crate) fn term(&self, a: &Association, with_jacobian: bool) -> TermInput {
+    pub(crate) fn term<const COLOR: bool>(&self, a: &Association, with_jacobian: bool) -> TermInput {
         let ss = &self.scene.surfels()[a.scene_surfel as usize];
         let ms = &self.model.surfels()[a.model_surfel as usize];
         let level = ss.level as usize;
@@ -88,30 +89,36 @@ impl<'a> SumInput<'a> {
         let c = rotate_symmetric(r, &ss.cov()) + reg;
         let res = self.model.resolution(level);
         let (node, surfel) = (a.model_node, a.model_surfel);
-        let m = match (self.interpolate, with_jacobian, self.color_scale.is_some()) {
-            (false, _, _) => Interpolated::of(ms),
-            (true, true, false) => interpolate::<true, false>(self.model, node, surfel, &p, res),
-            (true, false, false) => interpolate::<false, false>(self.model, node, surfel, &p, res),
-            (true, true, true) => interpolate::<true, true>(self.model, node, surfel, &p, res),
-            (true, false, true) => interpolate::<false, true>(self.model, node, surfel, &p, res),
+        let m = match (self.interpolate, with_jacobian) {
+            (false, _) => Interpolated::of(ms),
+            (true, true) => interpolate::<true, COLOR>(self.model, node, surfel, &p, res),
+            (true, false) => interpolate::<false, COLOR>(self.model, node, surfel, &p, res),
         };
-        let color = self.color_scale.map(|scale| ColorResidual {
-            d: (m.color - ss.color.cast::<f64>()).component_mul(&scale),
-            k: Matrix3::from_diagonal(&scale) * m.color_jacobian,
-        });
+        let color = if COLOR {
+            self.color_scale.map(|scale| ColorResidual {
+                d: (m.color - ss.color.cast::<f64>()).component_mul(&scale),
+                k: Matrix3::from_diagonal(&scale) * m.color_jacobian,
+            })
+        } else {
+            None
+        };
         TermInput { model_mean: m.mean, model_cov: m.cov + reg, p, c, a: Matrix3::identity() - m.jacobian, color }
     }
 
     /// Adds the term of one association to `acc`.
     #[inline]
     pub(crate) fn accumulate(&self, a: &Association, what: Sum, acc: &mut Partial) {
-        add(&self.term(a, what.needs_jacobian()), what, acc);
+        if self.color_scale.is_some() {
+            add(&self.term::<true>(a, what.needs_jacobian()), what, acc);
+        } else {
+            add(&self.term::<false>(a, what.needs_jacobian()), what, acc);
+        }
     }
 
     /// [`SumInput::accumulate`], and the LM system (Eq. 5) of the same term into `lm`.
     #[inline]
     fn accumulate_with_lm(&self, a: &Association, what: Sum, acc: &mut Partial, lm: &mut Partial) {
-        let t = self.term(a, true);
+        let t = if self.color_scale.is_some() { self.term::<true>(a, true) } else { self.term::<false>(a, true) };
         add(&t, what, acc);
         add(&t, Sum::LmSystem, lm);
     }
