@@ -1,7 +1,8 @@
 //! The tracker step allocates nothing in any of its states with several objects:
 //! tracking, an object lost while another stays tracked (its last pose carried along the
 //! measured camera motion, the search around it refilled every frame), re-initialising
-//! and found again. Counted on every thread (rayon workers included) by a global
+//! and found again; one object registered with the colour term, the other without.
+//! Counted on every thread (rayon workers included) by a global
 //! allocator over a second pass of the same frames after `Tracker::reset`. (One test in
 //! this binary: the allocation counter is global.)
 
@@ -9,6 +10,7 @@ mod common;
 
 use common::counting_alloc::{Counting, first_allocation, start_counting, stop_counting};
 use common::scenes::{TwoGroupsRun, blank};
+use mrsmap::registration::ColorTerm;
 use mrsmap::tracking::{PoseEstimate, SearchRegion, Tracker, TrackerParams, TrackingStatus};
 
 #[global_allocator]
@@ -34,7 +36,8 @@ fn pass(
 fn every_tracker_state_allocates_nothing_with_two_objects() {
     let scene = TwoGroupsRun::new();
     assert_eq!(scene.targets.len(), FRAMES);
-    let (left, right) = scene.models(SearchRegion { translation_m: 0.02, yaw_rad: 0.05 });
+    let (mut left, right) = scene.models(SearchRegion { translation_m: 0.02, yaw_rad: 0.05 });
+    left.color_term = Some(ColorTerm::default());
     let (width, height) = (scene.cam.width as usize, scene.cam.height as usize);
     let mut tracker = Tracker::new(TrackerParams::default(), width, height, vec![left, right]).expect("tracker");
     let mut out = [blank(), blank()];
