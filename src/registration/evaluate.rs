@@ -45,7 +45,7 @@ pub(crate) struct SumInput<'a> {
     pub interpolate: bool,
     /// `a · res²` per level.
     pub regularization: [f64; MAX_LEVELS],
-    /// With the colour term ([`ColorTerm`]): `1/σ` of the `L`, `α`, `β` residuals.
+    /// With the colour term ([`ColorTerm`](super::ColorTerm)): `1/σ` of the `L`, `α`, `β` residuals.
     pub color_scale: Option<Vector3<f64>>,
 }
 

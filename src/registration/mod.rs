@@ -107,7 +107,8 @@ pub struct Registration {
     pub newton_iterations: usize,
     /// LM stopped on a small step with fresh associations (not on the iteration limit).
     pub converged: bool,
-    /// Mean of `dᵀΣ⁻¹d` over the final associations (≈ 3 for a good fit).
+    /// Mean of `dᵀΣ⁻¹d` over the final associations (≈ 3 for a good fit), plus the
+    /// colour term's `dᵀd` where it is on.
     pub mean_mahalanobis2: f64,
     /// Fraction of the scene's usable surfels that are associated (or covered by an
     /// associated finer surfel).
