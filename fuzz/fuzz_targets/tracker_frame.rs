@@ -87,6 +87,7 @@ fn fixture() -> &'static Fixture {
             map: model.map,
             initial_camera_from_object: object_from_camera.inverse(),
             search: SearchRegion { translation_m: 0.05, yaw_rad: 0.35 },
+            color_term: None,
         };
         Fixture { model, header, frames }
     })
