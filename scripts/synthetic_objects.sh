@@ -50,10 +50,12 @@ $BIN track --config "$config" --dataset "$OUT/track" --camera $CAMERA --reinitia
   --trajectory "$OUT/tracked.txt" > "$OUT/track.log" 2>&1 || { cat "$OUT/track.log"; exit 1; }
 echo
 echo "held-out path, $frames frames, all objects in one tracker:"
-# Guards (regressions, not targets; measured 2026-12-02, docs/evaluation.md): frames
-# estimated at least. The banana and Suzanne are never found from the start; the others
-# are found again after a loss because a lost object follows the camera motion the
-# tracked ones measure (`follow_tracked_objects`; without it: 2, 80 and 35 frames).
+# Guards (regressions, not targets; measured 2026-12-04, docs/evaluation.md): frames
+# estimated at least. The banana is never found from the start. The cow and Suzanne are
+# kept because a small object's scene map is all on one level (`small_objects_on_one_level`;
+# without it 35 and 0 frames); the others are found again after a loss because a lost
+# object follows the camera motion the tracked ones measure (`follow_tracked_objects`,
+# only from an object whose registration fixes its rotation: not the bottle's turn).
 while read -r o min_alone; do
   counts=$(sed -nE "s/^$o: ([0-9]+) frames tracking \(([0-9]+) held\), ([0-9]+) lost.*/\1 \2 \3/p" "$OUT/alone.log")
   read -r tracking held lost <<< "$counts"
@@ -66,11 +68,12 @@ done <<'TABLE'
 banana   0
 scissors 60
 bottle   190
-cow      200
-monkey   0
+cow      240
+monkey   60
 TABLE
 echo "  with a perfect detector after each loss:"
-# Guards (regressions, not targets: measured 2026-12-01 and recorded in docs/evaluation.md):
+# Guards (regressions, not targets: measured 2026-12-01, the cow's and Suzanne's 2026-12-04;
+# recorded in docs/evaluation.md):
 # frames estimated at least, ATE median at most (mm; the bottle's turn about its axis
 # is free, so its ATE is not guarded), precision and recall at least, gross failures
 # (> 200 mm) accepted at most.
@@ -104,8 +107,8 @@ done <<'TABLE'
 banana   140 25  0.9 0.9  0
 scissors 130 15  0.9 0.9  0
 bottle   200 -   0.9 0.9  3
-cow      220 11  0.9 0.85 2
-monkey   45  25  0.9 0.85 3
+cow      250 8   0.9 0.85 2
+monkey   65  12  0.9 0.85 3
 TABLE
 
 # The colour term (`color_term = true` on the object; not in the paper): the bottle's

@@ -191,6 +191,7 @@ struct RawTracker {
     threads: Option<usize>,
     pin_threads: Option<bool>,
     lambda: Option<f64>,
+    small_objects_on_one_level: Option<bool>,
     gate_mahalanobis2: Option<f64>,
     region_margin_px: Option<f64>,
     min_quality: Option<f64>,
@@ -241,6 +242,7 @@ pub fn parse_tracker_config(text: &str, origin: &Path) -> Result<TrackerConfig, 
     let t = raw.tracker;
     let mut params = TrackerParams::default();
     params.map.lambda = t.lambda.unwrap_or(params.map.lambda);
+    params.small_objects_on_one_level = t.small_objects_on_one_level.unwrap_or(params.small_objects_on_one_level);
     params.gate_mahalanobis2 = t.gate_mahalanobis2.unwrap_or(params.gate_mahalanobis2);
     params.region_margin_px = t.region_margin_px.unwrap_or(params.region_margin_px);
     params.min_quality = t.min_quality.unwrap_or(params.min_quality);

@@ -164,6 +164,12 @@ impl SurfelMap {
         &self.params
     }
 
+    /// Sets λ for the next build ([`MapParams::lambda`]; the tracker fits it to each
+    /// frame's object, [`MapParams::lambda_without_boundary_within`]).
+    pub(crate) fn set_lambda(&mut self, lambda: f64) {
+        self.params.lambda = lambda;
+    }
+
     /// Number of resolution levels.
     pub fn num_levels(&self) -> usize {
         self.params.num_levels

@@ -125,6 +125,37 @@ impl MapParams {
         }
         t
     }
+
+    /// A λ at most an octave below `self.lambda` (cells at most one level finer than
+    /// the rule's) at which every point with a range in `near ..= far` (m) goes to one
+    /// level, the finest such; `self.lambda` when the ranges span more than a factor √2,
+    /// the band of one level, or no such λ exists.
+    ///
+    /// Why: the rule of §3.3 rounds each point's level to the nearest, so a small object
+    /// ends up on a coarser level from some range on, or split across two at the range
+    /// where the level steps: it then loses the cells along the step
+    /// ([`MapParams::exclude_level_boundaries`]) and its far part to cells too coarse to
+    /// leave it enough surfels to register (docs/evaluation.md, "Objects a gripper picks
+    /// up"). Rounding such an object's points down instead, all together, keeps its cells
+    /// within a factor 2 of `2 λ r²` (the rule keeps them within √2).
+    pub fn lambda_for_one_level(&self, near: f64, far: f64) -> f64 {
+        if !(near > 0.0 && far.is_finite() && near <= far && far * far < 2.0 * near * near) {
+            return self.lambda;
+        }
+        // A point goes to level `k` or finer iff `r² < c_k / λ` (the thresholds of
+        // `level_thresholds_r2`).
+        let c = |k: usize| self.finest_resolution_m * 2f64.powf(k as f64 + 0.5) / 2.0;
+        for k in 0..self.num_levels {
+            // All at level k: the farthest below step k (by a thousandth, beyond the
+            // single-precision thresholds), the nearest beyond step k − 1.
+            let largest = (c(k) / (far * far * 1.001)).min(self.lambda);
+            let least = if k == 0 { 0.0 } else { c(k - 1) / (near * near) }.max(0.5 * self.lambda);
+            if largest >= least {
+                return largest;
+            }
+        }
+        self.lambda
+    }
 }
 
 /// Capacities of the map arenas, fixed when a map is created.
@@ -142,5 +173,67 @@ impl MapCapacity {
     pub fn for_image(pixels: usize) -> Self {
         let nodes = (pixels / 6).max(4096);
         MapCapacity { nodes, surfels: nodes * 2 }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The level a point at range `r` goes to under `params` (as the aggregation decides).
+    fn level(params: &MapParams, r: f64) -> usize {
+        let t = params.level_thresholds_r2();
+        let r2 = (r * r) as f32;
+        (0..MAX_LEVELS).take_while(|&k| r2 >= t[k]).count()
+    }
+
+    #[test]
+    fn a_small_object_goes_to_one_level_the_finer() {
+        let p = MapParams::default();
+        // Level 0 ends at 0.94 m at λ = 0.01: an object over 0.85–1.05 m straddles it.
+        assert_ne!(level(&p, 0.85), level(&p, 1.05));
+        let fitted = MapParams { lambda: p.lambda_for_one_level(0.85, 1.05), ..p };
+        assert!(fitted.lambda < p.lambda && fitted.lambda >= 0.5 * p.lambda, "{}", fitted.lambda);
+        assert_eq!((level(&fitted, 0.85), level(&fitted, 1.05)), (0, 0));
+        // All on the coarser level at λ: moved to the finer one.
+        assert_eq!((level(&p, 1.0), level(&p, 1.2)), (1, 1));
+        let fitted = MapParams { lambda: p.lambda_for_one_level(1.0, 1.2), ..p };
+        assert_eq!((level(&fitted, 1.0), level(&fitted, 1.2)), (0, 0));
+        // Already all on the finest level: λ unchanged.
+        assert_eq!(p.lambda_for_one_level(0.5, 0.6), p.lambda);
+    }
+
+    #[test]
+    fn the_lambda_is_at_most_an_octave_lower() {
+        let p = MapParams::default();
+        // 1.5–1.6 m is on level 2 at λ; level 0 would need λ below half of it: level 1.
+        assert_eq!((level(&p, 1.5), level(&p, 1.6)), (2, 2));
+        let fitted = MapParams { lambda: p.lambda_for_one_level(1.5, 1.6), ..p };
+        assert_eq!((level(&fitted, 1.5), level(&fitted, 1.6)), (1, 1));
+        assert!(fitted.lambda >= 0.5 * p.lambda);
+        // Every object within one band ends up on one level, never a coarser one.
+        for i in 0..400 {
+            let near = 0.3 + 0.01 * i as f64;
+            for ratio in [1.0, 1.1, 1.3, 1.41] {
+                let far = near * ratio;
+                let fitted = MapParams { lambda: p.lambda_for_one_level(near, far), ..p };
+                assert!(fitted.lambda <= p.lambda && fitted.lambda >= 0.5 * p.lambda);
+                let levels = (level(&fitted, near), level(&fitted, far));
+                if levels.1 < p.num_levels {
+                    assert_eq!(levels.0, levels.1, "near {near} far {far}");
+                    assert!(levels.1 <= level(&p, near), "near {near} far {far}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_large_object_keeps_the_rule() {
+        let p = MapParams::default();
+        // Spread over more than a factor √2 in range (the teddy: 0.8–1.28 m).
+        assert_eq!(p.lambda_for_one_level(0.8, 1.28), p.lambda);
+        for (near, far) in [(0.0, 0.5), (1.0, f64::INFINITY), (f64::NAN, 1.0), (1.2, 1.0)] {
+            assert_eq!(p.lambda_for_one_level(near, far), p.lambda, "{near} {far}");
+        }
     }
 }

@@ -433,12 +433,7 @@ impl Solver<'_> {
         let unconstrained =
             RegistrationError::Degenerate { translation_std_m: f64::INFINITY, rotation_std_rad: f64::INFINITY };
         let cov = h.cholesky().ok_or(unconstrained)?.inverse();
-        // The worst direction of each block: the largest eigenvalue of its 3×3 covariance.
-        let worst = |offset: usize| {
-            let block: nalgebra::Matrix3<f64> = cov.fixed_view::<3, 3>(offset, offset).into_owned();
-            crate::geometry::eigen3::symmetric_eigenvalues(&block)[2].max(0.0).sqrt()
-        };
-        let (translation_std_m, rotation_std_rad) = (worst(0), worst(3));
+        let (translation_std_m, rotation_std_rad) = (worst_std(&cov, 0), worst_std(&cov, 3));
         let within = translation_std_m <= self.params.max_translation_std_m
             && rotation_std_rad <= self.params.max_rotation_std_rad;
         if !within {
@@ -461,6 +456,14 @@ impl Solver<'_> {
 /// instead of 82 of 558 perturbed starts failing; odometry and SLAM unchanged within
 /// 0.05 mm (docs/benchmarks.md).
 const REJECTION_GROWTH: f64 = 10.0;
+
+/// The standard deviation along the worst direction of the translation (`offset` 0, m)
+/// or rotation (3, rad) block of a covariance of `[ρ; ω]`: the root of the largest
+/// eigenvalue of the 3×3 block.
+pub(crate) fn worst_std(covariance: &Matrix6<f64>, offset: usize) -> f64 {
+    let block: nalgebra::Matrix3<f64> = covariance.fixed_view::<3, 3>(offset, offset).into_owned();
+    crate::geometry::eigen3::symmetric_eigenvalues(&block)[2].max(0.0).sqrt()
+}
 
 fn step_is_small(delta: &Vector6<f64>, p: &RegistrationParams) -> bool {
     delta.fixed_rows::<3>(0).norm() < p.step_tolerance_m && delta.fixed_rows::<3>(3).norm() < p.step_tolerance_rad

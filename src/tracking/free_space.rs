@@ -41,6 +41,9 @@ pub const MIN_EVIDENCE: u32 = 20;
 #[derive(Debug, Clone)]
 pub struct FreeSpaceProbe {
     points: Vec<(Vector3<f32>, Vector3<f32>)>,
+    /// Half the diagonal of the surfels' cells (m): a surface point of a cell lies within
+    /// it of the cell's mean.
+    half_diagonal_m: f32,
 }
 
 /// What the depth image says about the model at a pose.
@@ -73,7 +76,31 @@ impl FreeSpaceProbe {
             .filter(|(s, _)| s.usable() && s.level as usize == level)
             .map(|(s, n)| (s.mean, *n))
             .collect();
-        FreeSpaceProbe { points }
+        let half_diagonal_m = (0.5 * 3f64.sqrt() * model.params().resolution(level)) as f32;
+        FreeSpaceProbe { points, half_diagonal_m }
+    }
+
+    /// The ranges (m, from the camera centre) of the model surface facing the camera at
+    /// `camera_from_object` (the part a frame can show): those of the surfels that face it
+    /// (normals within about 73° of the ray back to the camera, in front of it), widened
+    /// by half a cell's diagonal. `None` when no surfel faces the camera.
+    pub fn facing_range(&self, camera_from_object: &Pose) -> Option<(f64, f64)> {
+        // In the object frame: a surfel at `q` lies at `p = R (q + Rᵀ t)` from the camera,
+        // at range `|q + Rᵀ t|`, depth `r₃ · q + t_z` (`r₃` the third row of `R`), and its
+        // normal faces the camera by `−(R n) · p = −n · (q + Rᵀ t)`.
+        let rotation = camera_from_object.rotation.to_rotation_matrix().into_inner().cast::<f32>();
+        let t = camera_from_object.translation.vector.cast::<f32>();
+        let (offset, depth_row) = (rotation.transpose() * t, rotation.row(2).transpose());
+        let (mut near2, mut far2) = (f32::INFINITY, 0.0f32);
+        for (mean, normal) in &self.points {
+            let d = mean + offset;
+            let r2 = d.norm_squared();
+            if depth_row.dot(mean) + t.z > 0.0 && -normal.dot(&d) > MIN_FACING_COS * r2.sqrt() {
+                (near2, far2) = (near2.min(r2), far2.max(r2));
+            }
+        }
+        let m = f64::from(self.half_diagonal_m);
+        (near2 <= far2).then(|| ((f64::from(near2.sqrt()) - m).max(0.0), f64::from(far2.sqrt()) + m))
     }
 
     /// Projects the surfels into `frame` at `camera_from_object` and counts the
@@ -215,7 +242,7 @@ mod tests {
                 points.push((Vector3::new(i as f32 * 0.02, j as f32 * 0.02, 0.0), Vector3::z()));
             }
         }
-        FreeSpaceProbe { points }
+        FreeSpaceProbe { points, half_diagonal_m: 0.01 }
     }
 
     fn camera() -> CameraModel {
@@ -292,6 +319,18 @@ mod tests {
         let (a, b) = (patch().measure(&plain, &pose, 0.02), patch().measure(&lens, &pose, 0.02));
         assert_eq!(a, b);
         assert!(a.supported > 40 && a.violated > 40, "{a:?}");
+    }
+
+    #[test]
+    fn the_facing_range_is_that_of_the_surfels_facing_the_camera() {
+        // The patch 1 m ahead: its corners ±0.1 m off the axis, widened by the margin.
+        let (near, far) = patch().facing_range(&facing(1.0)).expect("the patch faces the camera");
+        assert!((near - 0.99).abs() < 1e-6, "{near}");
+        assert!((far - (1.0f64 + 0.02).sqrt() - 0.01).abs() < 1e-6, "{far}");
+        // Turned away, or behind the camera: nothing faces it.
+        let away = Pose::from_parts(Translation3::new(0.0, 0.0, 1.0), UnitQuaternion::identity());
+        assert_eq!(patch().facing_range(&away), None);
+        assert_eq!(patch().facing_range(&facing(-1.0)), None);
     }
 
     #[test]

@@ -187,8 +187,9 @@ pub(crate) struct TrackedObject {
     /// is tracked).
     pub good_stamp_ns: Option<u64>,
     /// Set by a good registration of a tracked object in the frame being processed: the
-    /// frame `motion` starts at, and the registration's associations.
-    pub measured_motion: Option<(u64, usize)>,
+    /// frame `motion` starts at, and the largest standard deviation of the registration's
+    /// rotation (rad, Eq. 6).
+    pub measured_motion: Option<(u64, f64)>,
     /// Camera motion of the last good frame (`previous_from_current`).
     pub motion: Pose,
     pub tracking: bool,

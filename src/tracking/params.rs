@@ -9,6 +9,13 @@ pub struct TrackerParams {
     /// Building the scene map of each object's surroundings. Its finest resolution and
     /// number of levels are taken from each model.
     pub map: MapParams,
+    /// A small object — one whose surface facing the camera at the prior spans less
+    /// than a factor √2 in range, the band of one level — goes into its scene map all on
+    /// one level, the finer of the two its points round to under §3.3's rule (with λ at
+    /// most an octave lower: [`MapParams::lambda_for_one_level`]). Off: every point at
+    /// its own rounded level, as in the paper. Objects larger than that are never
+    /// affected (the teddy's scene maps are the paper's either way).
+    pub small_objects_on_one_level: bool,
     /// Registration of the scene map to the model. Tracking uses levels 0–4 (finest
     /// resolution to 16× finest, as the authors' tracker), at most 10 LM and 2 Newton
     /// iterations (from a constant-velocity prediction more change nothing: measured on
@@ -115,6 +122,7 @@ impl Default for TrackerParams {
         TrackerParams {
             // Scene maps are registered, never saved or fused: no colour scatter.
             map: MapParams { color_scatter: false, ..MapParams::default() },
+            small_objects_on_one_level: true,
             registration: RegistrationParams {
                 coarsest_level: 4,
                 lm_max_iterations: 10,

@@ -208,6 +208,16 @@ fn tracking_keys(p: &TrackerParams) -> Vec<Key> {
         ),
         key("lambda", p.map.lambda, &["scene maps: finest cell at range r is about 2·λ·r² (paper §3.3)"]),
         key(
+            "small_objects_on_one_level",
+            p.small_objects_on_one_level,
+            &[
+                "an object whose visible surface spans less than a factor 1.41 in",
+                "range goes into its scene map all on one level, the finer of the two",
+                "its points round to (λ at most halved); large objects never are. On",
+                "the rendered cow and Suzanne it keeps them tracked (docs/evaluation.md)",
+            ],
+        ),
+        key(
             "gate_mahalanobis2",
             p.gate_mahalanobis2,
             &["pixels farther from the model's point distribution are ignored (§5.2)"],
