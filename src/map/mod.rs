@@ -165,7 +165,7 @@ impl SurfelMap {
     }
 
     /// Sets λ for the next build ([`MapParams::lambda`]; the tracker fits it to each
-    /// frame's object, [`MapParams::lambda_without_boundary_within`]).
+    /// frame's object, [`MapParams::lambda_for_one_level`]).
     pub(crate) fn set_lambda(&mut self, lambda: f64) {
         self.params.lambda = lambda;
     }

@@ -135,9 +135,9 @@ impl MapParams {
     /// ends up on a coarser level from some range on, or split across two at the range
     /// where the level steps: it then loses the cells along the step
     /// ([`MapParams::exclude_level_boundaries`]) and its far part to cells too coarse to
-    /// leave it enough surfels to register (docs/evaluation.md, "Objects a gripper picks
-    /// up"). Rounding such an object's points down instead, all together, keeps its cells
-    /// within a factor 2 of `2 λ r²` (the rule keeps them within √2).
+    /// leave it enough surfels to register (docs/evaluation.md, "Small objects on one
+    /// level"). Rounding such an object's points down instead, all together, keeps its
+    /// cells within a factor 2 of `2 λ r²` (the rule keeps them within √2).
     pub fn lambda_for_one_level(&self, near: f64, far: f64) -> f64 {
         if !(near > 0.0 && far.is_finite() && near <= far && far * far < 2.0 * near * near) {
             return self.lambda;
