@@ -47,24 +47,47 @@ fn bench_runs_on_the_shipped_clip_with_or_without_the_pose_graph() {
 }
 
 #[test]
-fn bench_times_tracking_with_the_start_up_frame_apart() {
-    let (clip, camera, config) = (teddy_clip(), fr3_camera_file(), root().join("robot_config/tracker.toml"));
+fn bench_times_tracking_per_object_with_the_start_up_frame_apart() {
+    // The shipped configuration's teddy, and the same model a second time under another
+    // name: a row per object and one for the whole step.
+    let dir = temp_dir("bench_two");
+    let shipped = std::fs::read_to_string(root().join("robot_config/tracker.toml")).expect("the shipped config");
+    let models = root().join("models/teddy.mrsm");
+    let teddy = format!("\"{}\"", models.display());
+    let config = shipped.replace("\"../models/teddy.mrsm\"", &teddy);
+    let second = config.split("\n[[object]]\n").nth(1).expect("an object table").replace("\"teddy\"", "\"teddy2\"");
+    let config_path = dir.join("two.toml");
+    std::fs::write(&config_path, format!("{config}\n[[object]]\n{second}")).expect("config written");
+    let (clip, camera) = (teddy_clip(), fr3_camera_file());
     let args = ["bench", "--dataset", path_str(&clip), "--camera", path_str(&camera), "--passes", "1"];
     let more = ["--resolution", "qvga", "--graph-key-views", "0", "--tracking-first-frame", "0"];
-    let out = mrsmap(&[&args[..], &more[..], &["--tracking-config", path_str(&config)]].concat());
+    let out = mrsmap(&[&args[..], &more[..], &["--tracking-config", path_str(&config_path)]].concat());
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(
-        text.contains("| per frame median / p99 (ms) | scene map / registration median (ms) | first frame (ms) |"),
+        text.contains("| object | threads | frames (estimated) | per frame median / p99 (ms) | scene map / registration median (ms) | first frame (ms) |"),
         "{text}"
     );
-    // Eight frames: the first after start-up apart, seven in the median and p99.
-    let row = text.lines().find(|l| l.starts_with("| QVGA 320×240 |") && l.split('|').count() == 8);
-    let cells: Vec<&str> = row.unwrap_or_else(|| panic!("no tracking row: {text}")).split('|').map(str::trim).collect();
-    assert_eq!(cells[3], "7", "{text}");
     let ms = |cell: &str| -> Vec<f64> { cell.split(" / ").map(|v| v.parse().expect("a number")).collect() };
-    assert!(ms(cells[4]).iter().chain(&ms(cells[5])).all(|&t| t > 0.0), "{text}");
-    assert!(cells[6].parse::<f64>().is_ok_and(|ms| ms > 0.0), "{text}");
+    let row = |name: &str| -> Vec<String> {
+        let line = text.lines().find(|l| l.starts_with(&format!("| QVGA 320×240 | {name} |")));
+        line.unwrap_or_else(|| panic!("no tracking row for {name}: {text}"))
+            .split('|')
+            .map(|c| c.trim().to_string())
+            .collect()
+    };
+    for name in ["teddy", "teddy2"] {
+        let cells = row(name);
+        // Eight frames: the first after start-up apart, seven in the median and p99,
+        // every one estimated (the clip's teddy is tracked throughout).
+        assert_eq!(cells[4], "7 (7)", "{text}");
+        assert!(ms(&cells[5]).iter().chain(&ms(&cells[6])).all(|&t| t > 0.0), "{text}");
+        assert!(cells[7].parse::<f64>().is_ok_and(|ms| ms > 0.0), "{text}");
+    }
+    let step = row("all 2, the whole step");
+    assert_eq!(step[4], "7", "{text}");
+    let (step_ms, teddy_ms) = (ms(&step[5])[0], ms(&row("teddy")[5])[0]);
+    assert!(step_ms >= teddy_ms, "the whole step ({step_ms} ms) holds each object's ({teddy_ms} ms): {text}");
 }
 
 #[test]

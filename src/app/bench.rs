@@ -264,9 +264,11 @@ pub fn print(results: &[BenchResult], threads: usize) {
     }
 }
 
-/// The tracker's step times of object 0 (ms).
+/// The tracker's step times of one object (ms).
 #[derive(Debug, Clone)]
-pub struct TrackingTimes {
+pub struct ObjectTimes {
+    /// The object's name in the configuration.
+    pub name: String,
     /// The very first frame after start-up: it also computes the camera's ray table
     /// (once per camera, `RayTable::ensure`) and touches the workspaces for the first
     /// time. A long-running tracker pays this once.
@@ -278,13 +280,29 @@ pub struct TrackingTimes {
     pub scene_ms: Vec<f64>,
     /// Of `steady_ms`, the registration and the quality per frame.
     pub register_ms: Vec<f64>,
+    /// Of the steady frames, those whose pose was estimated from the frame (tracking,
+    /// no failed registration): an object that is not found costs less, and says so.
+    pub estimated: usize,
 }
+
+/// The tracker's step times: per object, and the whole step per frame.
+#[derive(Debug, Clone)]
+pub struct TrackingTimes {
+    /// Per object of the configuration, in its order.
+    pub objects: Vec<ObjectTimes>,
+    /// The whole step per steady frame: every object, and the end of the frame (the
+    /// motion that objects not seen follow).
+    pub step_ms: Vec<f64>,
+}
+
+/// One frame's times: per object (scene map, registration, estimated), and the step.
+type FrameTimes = (Vec<(f64, f64, bool)>, f64);
 
 /// Times the tracker's per-frame step (scene map + registration + quality, per object)
 /// on `frames` frames of a dataset from `first_frame`, every object started at its
 /// ground-truth pose; frames are decoded beforehand. With a `gap`, the thread sleeps
 /// that long before each frame (a live tracker idles between camera frames). Returns
-/// the times (ms) of object 0 per frame, over `passes` passes, the start-up frame apart.
+/// the times (ms) per object and frame, over `passes` passes, the start-up frame apart.
 pub fn tracking_ms(
     config: &crate::io::tracker_config::TrackerConfig,
     job: &BenchJob,
@@ -317,13 +335,13 @@ pub fn tracking_ms(
     // instead of being handed to a pool thread (which, after an idle gap, may wake
     // late). rayon cannot release a thread from a pool it joined: the loop gets a
     // thread of its own. The models load on that pool too.
-    let timed = || -> Result<Vec<(f64, f64)>> {
+    let timed = || -> Result<Vec<FrameTimes>> {
         let (pool, _) = super::dataset::thread_pool_on_this_thread(job.threads, config.pin_threads)?;
         let LoadedTracker { mut tracker, world_from_model, .. } =
             load_tracker(config, &pool, cam.width as usize, cam.height as usize)?;
         let tracker = &mut tracker;
         let mut out = StepOutput::new(tracker.len());
-        let mut ms = Vec::new();
+        let mut frames = Vec::new();
         for _ in 0..job.passes {
             for (k, w) in world_from_model.iter().enumerate() {
                 tracker.reinitialise(k, &(start.inverse() * w));
@@ -333,25 +351,38 @@ pub fn tracking_ms(
                 if !gap.is_zero() {
                     std::thread::sleep(gap);
                 }
+                let t0 = std::time::Instant::now();
                 track_frame(tracker, &pool, &frame, &mut out, workers);
-                ms.push((f64::from(out.build_ms[0]), f64::from(out.register_ms[0])));
+                let step_ms = t0.elapsed().as_secs_f64() * 1e3;
+                let objects = (0..tracker.len())
+                    .map(|k| (f64::from(out.build_ms[k]), f64::from(out.register_ms[k]), out.estimates[k].is_fresh()))
+                    .collect();
+                frames.push((objects, step_ms));
             }
         }
-        Ok(ms)
+        Ok(frames)
     };
-    let mut ms = std::thread::scope(|s| {
+    let mut frames = std::thread::scope(|s| {
         s.spawn(timed).join().map_err(|_| anyhow::anyhow!("the tracking benchmark's thread failed"))
     })??;
-    if ms.is_empty() {
-        bail!("no tracking frames were timed");
+    if frames.len() < 2 {
+        bail!("the tracking benchmark needs at least 2 frames (the first one is timed apart)");
     }
-    let (first_scene, first_register) = ms.remove(0);
-    Ok(TrackingTimes {
-        first_ms: first_scene + first_register,
-        steady_ms: ms.iter().map(|(s, r)| s + r).collect(),
-        scene_ms: ms.iter().map(|m| m.0).collect(),
-        register_ms: ms.iter().map(|m| m.1).collect(),
-    })
+    let (first, _) = frames.remove(0);
+    let objects = config
+        .objects
+        .iter()
+        .enumerate()
+        .map(|(k, o)| ObjectTimes {
+            name: o.name.clone(),
+            first_ms: first[k].0 + first[k].1,
+            steady_ms: frames.iter().map(|(f, _)| f[k].0 + f[k].1).collect(),
+            scene_ms: frames.iter().map(|(f, _)| f[k].0).collect(),
+            register_ms: frames.iter().map(|(f, _)| f[k].1).collect(),
+            estimated: frames.iter().filter(|(f, _)| f[k].2).count(),
+        })
+        .collect();
+    Ok(TrackingTimes { objects, step_ms: frames.iter().map(|f| f.1).collect() })
 }
 
 #[cfg(test)]

@@ -319,10 +319,12 @@ pub struct BenchArgs {
     #[arg(long, default_value_t = 100)]
     pub graph_key_views: usize,
     /// Also time object tracking with this tracker configuration (frames from
-    /// --tracking-first-frame, objects started at their ground-truth pose). Each frame is
-    /// also split into the scene map (region, gate, map building) and the registration
-    /// with the quality (medians). The first frame after start-up, which also computes
-    /// the camera's ray table once, is shown in its own column, not in the median and p99.
+    /// --tracking-first-frame, objects started at their ground-truth pose). One row per
+    /// object: its time per frame, split into the scene map (region, gate, map building)
+    /// and the registration with the quality (medians), and the frames whose pose was
+    /// estimated (an object not found costs less); with several objects, a row for the
+    /// whole step. The first frame after start-up, which also computes the camera's ray
+    /// table once, is shown in its own column, not in the median and p99.
     #[arg(long)]
     pub tracking_config: Option<PathBuf>,
     /// First frame of the tracking benchmark (the teddy model was learned from 0–99).

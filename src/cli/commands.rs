@@ -474,24 +474,37 @@ pub fn bench(a: BenchArgs) -> Result<()> {
         let gap_note =
             if gap.is_zero() { String::new() } else { format!(", {} ms idle before each frame", a.frame_gap_ms) };
         println!(
-            "\n| tracking (object '{}'{gap_note}) | threads | frames | per frame median / p99 (ms) | scene map / registration median (ms) | first frame (ms) |",
-            config.objects[0].name
+            "\n| tracking{gap_note} | object | threads | frames (estimated) | per frame median / p99 (ms) | scene map / registration median (ms) | first frame (ms) |"
         );
-        println!("|---|---|---|---|---|---|");
+        println!("|---|---|---|---|---|---|---|");
         for &res in &job.resolutions {
             let half = res == app::bench::Resolution::Qvga;
+            let size = if half { "QVGA 320×240" } else { "VGA 640×480" };
             let t = app::bench::tracking_ms(config, &job, a.tracking_first_frame, half, gap)?;
-            let (ms, median) = (&t.steady_ms, |v: &[f64]| app::report::percentile(v, 0.5));
-            println!(
-                "| {} | {threads} | {} | {:.2} / {:.2} | {:.2} / {:.2} | {:.2} |",
-                if half { "QVGA 320×240" } else { "VGA 640×480" },
-                ms.len(),
-                median(ms),
-                app::report::percentile(ms, 0.99),
-                median(&t.scene_ms),
-                median(&t.register_ms),
-                t.first_ms
-            );
+            let (median, p99) =
+                (|v: &[f64]| app::report::percentile(v, 0.5), |v: &[f64]| app::report::percentile(v, 0.99));
+            for o in &t.objects {
+                println!(
+                    "| {size} | {} | {threads} | {} ({}) | {:.2} / {:.2} | {:.2} / {:.2} | {:.2} |",
+                    o.name,
+                    o.steady_ms.len(),
+                    o.estimated,
+                    median(&o.steady_ms),
+                    p99(&o.steady_ms),
+                    median(&o.scene_ms),
+                    median(&o.register_ms),
+                    o.first_ms
+                );
+            }
+            if t.objects.len() > 1 {
+                println!(
+                    "| {size} | all {}, the whole step | {threads} | {} | {:.2} / {:.2} | – | – |",
+                    t.objects.len(),
+                    t.step_ms.len(),
+                    median(&t.step_ms),
+                    p99(&t.step_ms)
+                );
+            }
         }
     }
     // No times without key views (`--graph-key-views 0`): nothing to print.
