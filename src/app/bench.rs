@@ -295,6 +295,33 @@ pub struct TrackingTimes {
     pub step_ms: Vec<f64>,
 }
 
+/// Prints the rows of [`tracking_ms`]'s times at one image `size`: one per object, and
+/// with several, one for the whole step.
+pub fn print_tracking(t: &TrackingTimes, size: &str, threads: usize) {
+    for o in &t.objects {
+        println!(
+            "| {size} | {} | {threads} | {} ({}) | {:.2} / {:.2} | {:.2} / {:.2} | {:.2} |",
+            o.name,
+            o.steady_ms.len(),
+            o.estimated,
+            percentile(&o.steady_ms, 0.5),
+            percentile(&o.steady_ms, 0.99),
+            percentile(&o.scene_ms, 0.5),
+            percentile(&o.register_ms, 0.5),
+            o.first_ms
+        );
+    }
+    if t.objects.len() > 1 {
+        println!(
+            "| {size} | all {}, the whole step | {threads} | {} | {:.2} / {:.2} | – | – |",
+            t.objects.len(),
+            t.step_ms.len(),
+            percentile(&t.step_ms, 0.5),
+            percentile(&t.step_ms, 0.99)
+        );
+    }
+}
+
 /// One frame's times: per object (scene map, registration, estimated), and the step.
 type FrameTimes = (Vec<(f64, f64, bool)>, f64);
 

@@ -481,30 +481,7 @@ pub fn bench(a: BenchArgs) -> Result<()> {
             let half = res == app::bench::Resolution::Qvga;
             let size = if half { "QVGA 320×240" } else { "VGA 640×480" };
             let t = app::bench::tracking_ms(config, &job, a.tracking_first_frame, half, gap)?;
-            let (median, p99) =
-                (|v: &[f64]| app::report::percentile(v, 0.5), |v: &[f64]| app::report::percentile(v, 0.99));
-            for o in &t.objects {
-                println!(
-                    "| {size} | {} | {threads} | {} ({}) | {:.2} / {:.2} | {:.2} / {:.2} | {:.2} |",
-                    o.name,
-                    o.steady_ms.len(),
-                    o.estimated,
-                    median(&o.steady_ms),
-                    p99(&o.steady_ms),
-                    median(&o.scene_ms),
-                    median(&o.register_ms),
-                    o.first_ms
-                );
-            }
-            if t.objects.len() > 1 {
-                println!(
-                    "| {size} | all {}, the whole step | {threads} | {} | {:.2} / {:.2} | – | – |",
-                    t.objects.len(),
-                    t.step_ms.len(),
-                    median(&t.step_ms),
-                    p99(&t.step_ms)
-                );
-            }
+            app::bench::print_tracking(&t, size, threads);
         }
     }
     // No times without key views (`--graph-key-views 0`): nothing to print.
