@@ -192,6 +192,7 @@ struct RawTracker {
     pin_threads: Option<bool>,
     lambda: Option<f64>,
     small_objects_on_one_level: Option<bool>,
+    scene_min_points_by_image_size: Option<bool>,
     gate_mahalanobis2: Option<f64>,
     region_margin_px: Option<f64>,
     min_quality: Option<f64>,
@@ -243,6 +244,8 @@ pub fn parse_tracker_config(text: &str, origin: &Path) -> Result<TrackerConfig, 
     let mut params = TrackerParams::default();
     params.map.lambda = t.lambda.unwrap_or(params.map.lambda);
     params.small_objects_on_one_level = t.small_objects_on_one_level.unwrap_or(params.small_objects_on_one_level);
+    params.scene_min_points_by_image_size =
+        t.scene_min_points_by_image_size.unwrap_or(params.scene_min_points_by_image_size);
     params.gate_mahalanobis2 = t.gate_mahalanobis2.unwrap_or(params.gate_mahalanobis2);
     params.region_margin_px = t.region_margin_px.unwrap_or(params.region_margin_px);
     params.min_quality = t.min_quality.unwrap_or(params.min_quality);

@@ -27,7 +27,7 @@ pub mod tree;
 pub use build::{BuildReport, MapBuilder, MapError, PlacedFrame};
 pub use descriptor::{DESCRIPTOR_LEN, Descriptor, descriptor_distance2};
 pub use gate_cells::{CellGate, GateCells};
-pub use params::{MAX_LEVELS, MapCapacity, MapParams, MapParamsError};
+pub use params::{MAX_LEVELS, MapCapacity, MapParams, MapParamsError, SCALED_MIN_POINTS_FLOOR};
 pub use region::{GateVolume, ImageRegion, MAX_GATE_CORNERS, PixelGate, PolygonEdge, RayEllipsoid, RowSpans};
 pub use restore::{MapParts, RestoreError};
 pub use stats::SurfelStats;
@@ -168,6 +168,12 @@ impl SurfelMap {
     /// frame's object, [`MapParams::lambda_for_one_level`]).
     pub(crate) fn set_lambda(&mut self, lambda: f64) {
         self.params.lambda = lambda;
+    }
+
+    /// Sets the points a surfel needs for the next build ([`MapParams::min_points`]; the
+    /// tracker fits it to the image, [`MapParams::min_points_for_image`]).
+    pub(crate) fn set_min_points(&mut self, min_points: f64) {
+        self.params.min_points = min_points;
     }
 
     /// Number of resolution levels.

@@ -5,6 +5,13 @@ use thiserror::Error;
 /// The most resolution levels a map can have.
 pub const MAX_LEVELS: usize = 8;
 
+/// The least `min_points` that [`MapParams::min_points_for_image`] scales to: a 3-D
+/// covariance from fewer points is too rough to register with.
+pub const SCALED_MIN_POINTS_FLOOR: f64 = 5.0;
+
+/// Pixels of a VGA image (640 × 480), the size the paper's thresholds are for.
+const VGA_PIXELS: f64 = 640.0 * 480.0;
+
 /// Why map parameters were rejected.
 #[derive(Debug, Error, Clone, PartialEq)]
 pub enum MapParamsError {
@@ -126,6 +133,19 @@ impl MapParams {
         t
     }
 
+    /// `min_points` for an image of `pixels` pixels: scaled by its pixel count against
+    /// the VGA images the paper's threshold is for (640 × 480), not above `min_points`
+    /// and not below [`SCALED_MIN_POINTS_FLOOR`] (or `min_points` when that is lower).
+    ///
+    /// Why: a cell's size in metres follows its range (§3.3) whatever the image, so a
+    /// QVGA image puts a quarter of the points a VGA one puts in each cell; with the
+    /// same threshold a small object's finest cells fall below it (docs/evaluation.md,
+    /// "Small objects at QVGA"). Not in the paper, which uses VGA images only.
+    pub fn min_points_for_image(&self, pixels: usize) -> f64 {
+        let floor = SCALED_MIN_POINTS_FLOOR.min(self.min_points);
+        (self.min_points * pixels as f64 / VGA_PIXELS).clamp(floor, self.min_points)
+    }
+
     /// A λ at most an octave below `self.lambda` (cells at most one level finer than
     /// the rule's) at which every point with a range in `near ..= far` (m) goes to one
     /// level, the finest such; `self.lambda` when the ranges span more than a factor √2,
@@ -185,6 +205,18 @@ mod tests {
         let t = params.level_thresholds_r2();
         let r2 = (r * r) as f32;
         (0..MAX_LEVELS).take_while(|&k| r2 >= t[k]).count()
+    }
+
+    #[test]
+    fn min_points_scale_with_the_image_between_the_floor_and_the_papers() {
+        let p = MapParams::default();
+        assert_eq!(p.min_points_for_image(640 * 480), 10.0);
+        assert_eq!(p.min_points_for_image(1280 * 960), 10.0, "never above the paper's");
+        assert_eq!(p.min_points_for_image(480 * 360), 5.625);
+        assert_eq!(p.min_points_for_image(320 * 240), SCALED_MIN_POINTS_FLOOR);
+        assert_eq!(p.min_points_for_image(0), SCALED_MIN_POINTS_FLOOR);
+        let few = MapParams { min_points: 4.0, ..p };
+        assert_eq!(few.min_points_for_image(320 * 240), 4.0, "never above the configured");
     }
 
     #[test]

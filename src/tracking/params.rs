@@ -16,6 +16,12 @@ pub struct TrackerParams {
     /// its own rounded level, as in the paper. Objects larger than that are never
     /// affected (the teddy's scene maps are the paper's either way).
     pub small_objects_on_one_level: bool,
+    /// The scene map's least points per surfel (`map.min_points`, the paper's 10 for
+    /// VGA) scale with the image's pixel count against VGA, not below 5
+    /// ([`MapParams::min_points_for_image`]): 5 at QVGA, where a cell holds a quarter of
+    /// the pixels. Off: `map.min_points` at every image size. VGA images are never
+    /// affected.
+    pub scene_min_points_by_image_size: bool,
     /// Registration of the scene map to the model. Tracking uses levels 0–4 (finest
     /// resolution to 16× finest, as the authors' tracker), at most 10 LM and 2 Newton
     /// iterations (from a constant-velocity prediction more change nothing: measured on
@@ -123,6 +129,7 @@ impl Default for TrackerParams {
             // Scene maps are registered, never saved or fused: no colour scatter.
             map: MapParams { color_scatter: false, ..MapParams::default() },
             small_objects_on_one_level: true,
+            scene_min_points_by_image_size: true,
             registration: RegistrationParams {
                 coarsest_level: 4,
                 lm_max_iterations: 10,

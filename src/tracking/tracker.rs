@@ -202,6 +202,10 @@ impl Tracker {
             None => self.params.map.lambda,
         };
         object.scene.set_lambda(lambda);
+        if self.params.scene_min_points_by_image_size {
+            let pixels = frame.camera.width as usize * frame.camera.height as usize;
+            object.scene.set_min_points(self.params.map.min_points_for_image(pixels));
+        }
         self.builder.build_region(frame, &region, &mut object.scene)
     }
 

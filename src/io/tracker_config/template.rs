@@ -181,13 +181,15 @@ fn sections() -> Vec<(&'static str, &'static [&'static str], Vec<Key>)> {
 
 /// The keys of `[tracker]`.
 fn tracker_keys(p: &TrackerParams) -> Vec<Key> {
-    let mut keys = tracking_keys(p);
+    let mut keys = worker_keys();
+    keys.extend(scene_map_keys(p));
+    keys.extend(tracking_keys(p));
     keys.extend(registration_keys(p));
     keys
 }
 
-/// The keys of `[tracker]` on threads, the scene map and the tracking state.
-fn tracking_keys(p: &TrackerParams) -> Vec<Key> {
+/// The keys of `[tracker]` on the worker threads.
+fn worker_keys() -> Vec<Key> {
     vec![
         Key {
             name: "threads",
@@ -206,6 +208,12 @@ fn tracking_keys(p: &TrackerParams) -> Vec<Key> {
                 "long (docs/benchmarks.md, \"The live tracker after an idle gap\")",
             ],
         ),
+    ]
+}
+
+/// The keys of `[tracker]` on the scene map (§3, §5.2).
+fn scene_map_keys(p: &TrackerParams) -> Vec<Key> {
+    vec![
         key("lambda", p.map.lambda, &["scene maps: finest cell at range r is about 2·λ·r² (paper §3.3)"]),
         key(
             "small_objects_on_one_level",
@@ -215,6 +223,16 @@ fn tracking_keys(p: &TrackerParams) -> Vec<Key> {
                 "range goes into its scene map all on one level, the finer of the two",
                 "its points round to (λ at most halved); large objects never are. On",
                 "the rendered cow and Suzanne it keeps them tracked (docs/evaluation.md)",
+            ],
+        ),
+        key(
+            "scene_min_points_by_image_size",
+            p.scene_min_points_by_image_size,
+            &[
+                "a scene surfel needs the paper's 10 points in a VGA image, fewer in",
+                "a smaller one (the same cell holds fewer pixels), not below 5: 5 at",
+                "QVGA. On rendered small objects at QVGA it keeps the cow tracked",
+                "(docs/evaluation.md, \"Small objects at QVGA\")",
             ],
         ),
         key(
@@ -230,6 +248,12 @@ fn tracking_keys(p: &TrackerParams) -> Vec<Key> {
                 "much on each side (for border detection only)",
             ],
         ),
+    ]
+}
+
+/// The keys of `[tracker]` on the tracking state: failure, loss, search.
+fn tracking_keys(p: &TrackerParams) -> Vec<Key> {
+    vec![
         key(
             "min_quality",
             p.min_quality,
