@@ -207,7 +207,11 @@ fn a_failed_prediction_is_retried_from_the_last_pose() {
     let first = render_frame(&mesh, cam, &Pose::identity());
     let jumped = render_frame(&mesh, cam, &left_increment(&Vector6::new(0.09, 0.0, 0.0, 0.0, 0.0, 0.0)));
     let run = |retry_from_last_pose: bool| {
-        let params = TrackerParams { retry_from_last_pose, ..TrackerParams::default() };
+        // The paper's 10 points per surfel at this QVGA size: with 5
+        // (`scene_min_points_by_image_size`, for small objects) this room lands 2.35 mm
+        // off instead of 0.55 mm (docs/evaluation.md, "Small objects at QVGA").
+        let params =
+            TrackerParams { retry_from_last_pose, scene_min_points_by_image_size: false, ..TrackerParams::default() };
         let model = object_model(&[(&first, Pose::identity())]);
         let mut tracker = Tracker::new(params, cam.width as usize, cam.height as usize, vec![model]).expect("tracker");
         let out = [step(&mut tracker, &first, 0), step(&mut tracker, &jumped, 1), step(&mut tracker, &first, 2)];
@@ -226,6 +230,7 @@ fn a_failed_prediction_is_retried_from_the_last_pose() {
     assert!(without[2].is_held(), "the prediction fails: {:?}", without[2]);
     assert!(with[2].is_fresh(), "the retry tracks the frame: {:?}", with[2]);
     let (mm, deg) = pose_error(&with[2].camera_from_object.inverse(), &Pose::identity());
+    println!("retried frame: {:.2} mm {:.3}°", mm * 1e3, deg);
     assert!(mm < 2e-3 && deg < 0.25, "{:.2} mm {:.3}°", mm * 1e3, deg);
 }
 
