@@ -113,6 +113,12 @@ pub struct Registration {
     /// Fraction of the scene's usable surfels that are associated (or covered by an
     /// associated finer surfel).
     pub overlap: f64,
+    /// Standard deviation of the translation along its worst direction by
+    /// [`Self::covariance`] (m): the root of the largest eigenvalue of its 3×3 block.
+    pub translation_std_m: f64,
+    /// Standard deviation of the rotation about its worst axis by [`Self::covariance`]
+    /// (rad).
+    pub rotation_std_rad: f64,
 }
 
 /// Registers `scene` to `model` starting from `initial` (`model_from_scene`).
@@ -164,17 +170,19 @@ impl Solver<'_> {
         if overlap < params.min_overlap {
             return Err(RegistrationError::PoorOverlap { overlap, needed: params.min_overlap });
         }
-        let (covariance, clustered_covariance, associations, mean_mahalanobis2) = self.covariance()?;
+        let fit = self.covariance()?;
         Ok(Registration {
             model_from_scene: self.pose,
-            covariance,
-            clustered_covariance,
-            associations,
+            covariance: fit.covariance,
+            clustered_covariance: fit.clustered_covariance,
+            associations: fit.associations,
             lm_iterations,
             newton_iterations,
             converged,
-            mean_mahalanobis2,
+            mean_mahalanobis2: fit.mean_mahalanobis2,
             overlap,
+            translation_std_m: fit.translation_std_m,
+            rotation_std_rad: fit.rotation_std_rad,
         })
     }
 
@@ -420,7 +428,7 @@ impl Solver<'_> {
     /// sandwich reduces to `H⁻¹`, computed here as such. Also the cluster-robust
     /// sandwich `H⁻¹ S H⁻¹` from the scatter `S` of the same sweep's slot gradients
     /// ([`Registration::clustered_covariance`]).
-    fn covariance(&mut self) -> Result<(Matrix6<f64>, Matrix6<f64>, usize, f64), RegistrationError> {
+    fn covariance(&mut self) -> Result<Fit, RegistrationError> {
         let pose = self.pose;
         let (sys, scatter) = match self.lm_system.take() {
             Some((at, sys, scatter)) if at == pose => (sys, scatter),
@@ -443,8 +451,26 @@ impl Solver<'_> {
         // Plus Eq. (6) itself: positive definite even where few clusters leave the
         // scatter singular.
         let clustered = cov * scatter * cov + cov;
-        Ok((cov, (clustered + clustered.transpose()) * 0.5, sys.count as usize, mean))
+        Ok(Fit {
+            covariance: cov,
+            clustered_covariance: (clustered + clustered.transpose()) * 0.5,
+            associations: sys.count as usize,
+            mean_mahalanobis2: mean,
+            translation_std_m,
+            rotation_std_rad,
+        })
     }
+}
+
+/// What [`Solver::covariance`] finds at the final pose (the fields of [`Registration`]
+/// of the same names).
+struct Fit {
+    covariance: Matrix6<f64>,
+    clustered_covariance: Matrix6<f64>,
+    associations: usize,
+    mean_mahalanobis2: f64,
+    translation_std_m: f64,
+    rotation_std_rad: f64,
 }
 
 /// On a rejected LM step the damping grows by this factor on top of Nielsen's `ν`
@@ -460,7 +486,7 @@ const REJECTION_GROWTH: f64 = 10.0;
 /// The standard deviation along the worst direction of the translation (`offset` 0, m)
 /// or rotation (3, rad) block of a covariance of `[ρ; ω]`: the root of the largest
 /// eigenvalue of the 3×3 block.
-pub(crate) fn worst_std(covariance: &Matrix6<f64>, offset: usize) -> f64 {
+fn worst_std(covariance: &Matrix6<f64>, offset: usize) -> f64 {
     let block: nalgebra::Matrix3<f64> = covariance.fixed_view::<3, 3>(offset, offset).into_owned();
     crate::geometry::eigen3::symmetric_eigenvalues(&block)[2].max(0.0).sqrt()
 }

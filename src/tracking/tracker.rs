@@ -10,7 +10,7 @@ use crate::geometry::Pose;
 use crate::geometry::se3::{invert_left_covariance, left_covariance_to_ros};
 use crate::map::{BuildReport, MapBuilder, MapCapacity, MapError, MapParams, MapParamsError, SurfelMap};
 use crate::registration::{
-    MatchScratch, Registration, RegistrationError, RegistrationParams, RegistrationWorkspace, register, worst_std,
+    MatchScratch, Registration, RegistrationError, RegistrationParams, RegistrationWorkspace, register,
 };
 use thiserror::Error;
 
@@ -236,7 +236,7 @@ impl Tracker {
             object.carried_stamp_ns = frame.stamp_ns;
             object.good_stamp_ns = Some(frame.stamp_ns);
             // How far the camera motion it measures may be turned (Eq. 6).
-            let rotation_std = attempt.result.as_ref().map_or(f64::INFINITY, |r| worst_std(&r.covariance, 3));
+            let rotation_std = attempt.result.as_ref().map_or(f64::INFINITY, |r| r.rotation_std_rad);
             object.measured_motion = since.map(|since| (since, rotation_std));
         }
         e
