@@ -170,20 +170,7 @@ impl Solver<'_> {
         if overlap < params.min_overlap {
             return Err(RegistrationError::PoorOverlap { overlap, needed: params.min_overlap });
         }
-        let fit = self.covariance()?;
-        Ok(Registration {
-            model_from_scene: self.pose,
-            covariance: fit.covariance,
-            clustered_covariance: fit.clustered_covariance,
-            associations: fit.associations,
-            lm_iterations,
-            newton_iterations,
-            converged,
-            mean_mahalanobis2: fit.mean_mahalanobis2,
-            overlap,
-            translation_std_m: fit.translation_std_m,
-            rotation_std_rad: fit.rotation_std_rad,
-        })
+        self.covariance(lm_iterations, newton_iterations, converged, overlap)
     }
 
     fn levels(&self) -> (usize, usize) {
@@ -427,8 +414,15 @@ impl Solver<'_> {
     /// `Jⱼᵀ Σⱼ⁻¹ Jⱼ`, the same as its Gauss–Newton Hessian block; with unit weights the
     /// sandwich reduces to `H⁻¹`, computed here as such. Also the cluster-robust
     /// sandwich `H⁻¹ S H⁻¹` from the scatter `S` of the same sweep's slot gradients
-    /// ([`Registration::clustered_covariance`]).
-    fn covariance(&mut self) -> Result<Fit, RegistrationError> {
+    /// ([`Registration::clustered_covariance`]). Returns the registration at the final
+    /// pose with what the earlier steps report.
+    fn covariance(
+        &mut self,
+        lm_iterations: usize,
+        newton_iterations: usize,
+        converged: bool,
+        overlap: f64,
+    ) -> Result<Registration, RegistrationError> {
         let pose = self.pose;
         let (sys, scatter) = match self.lm_system.take() {
             Some((at, sys, scatter)) if at == pose => (sys, scatter),
@@ -451,26 +445,20 @@ impl Solver<'_> {
         // Plus Eq. (6) itself: positive definite even where few clusters leave the
         // scatter singular.
         let clustered = cov * scatter * cov + cov;
-        Ok(Fit {
+        Ok(Registration {
+            model_from_scene: pose,
             covariance: cov,
             clustered_covariance: (clustered + clustered.transpose()) * 0.5,
             associations: sys.count as usize,
+            lm_iterations,
+            newton_iterations,
+            converged,
             mean_mahalanobis2: mean,
+            overlap,
             translation_std_m,
             rotation_std_rad,
         })
     }
-}
-
-/// What [`Solver::covariance`] finds at the final pose (the fields of [`Registration`]
-/// of the same names).
-struct Fit {
-    covariance: Matrix6<f64>,
-    clustered_covariance: Matrix6<f64>,
-    associations: usize,
-    mean_mahalanobis2: f64,
-    translation_std_m: f64,
-    rotation_std_rad: f64,
 }
 
 /// On a rejected LM step the damping grows by this factor on top of Nielsen's `ν`
