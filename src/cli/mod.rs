@@ -39,7 +39,7 @@ pub enum Command {
     /// images' timestamps. With ground truth, the RPE is printed at the end, and how many
     /// of the registrations' predicted standard deviations (Eq. 6) the errors are.
     Odometry(OdometryArgs),
-    /// Key-view SLAM over a TUM RGB-D dataset, fused into a model file (paper §5.1).
+    /// Key-view SLAM over a TUM RGB-D dataset, fused into a model file (paper §5.1)
     ///
     /// Every frame is registered to its reference key view; key views are added as the
     /// camera moves, loop closures are found by randomised extra registrations validated
@@ -78,8 +78,7 @@ pub enum Command {
     /// Control-stack client: subscribes to the tracker's poses and prints them (and
     /// writes TUM trajectories with --out). The example to copy into a robot.
     Poses(PosesArgs),
-    /// Detector client: sends one detection of an object to the running tracker, which
-    /// re-initialises the object there, and reports what came of it.
+    /// Detector client: sends one detection to the running tracker and reports the outcome
     ///
     /// The tracker registers the next frame from the detected pose and resumes tracking
     /// if the registration's quality is good; by default only an object that is lost or
@@ -92,7 +91,7 @@ pub enum Command {
     ///   mrsmap detect --object teddy --pose 0.05 0.1 0.9 0 0 0 1
     #[command(verbatim_doc_comment)]
     Detect(DetectArgs),
-    /// Offline: the tracker's per-frame step on every frame of an MCAP recording.
+    /// Offline: the tracker's per-frame step on every frame of an MCAP recording
     ///
     /// Reads ROS 2 (sensor_msgs/msg/Image + CameraInfo, CDR) or Foxglove (RawImage +
     /// CameraCalibration, protobuf) recordings, through the file's index when it has one
@@ -111,7 +110,7 @@ pub enum Command {
     /// Convert recordings (TUM RGB-D → MCAP).
     #[command(subcommand)]
     Convert(ConvertCommand),
-    /// Synthetic RGB-D sequences with exact ground truth, rendered from a scene file.
+    /// Synthetic RGB-D sequences with exact ground truth, rendered from a scene file
     ///
     /// Textured meshes (Wavefront OBJ with a PNG or JPEG texture) and boxes with a
     /// procedural texture, seen along each of the scene's camera paths through a model
