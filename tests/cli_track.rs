@@ -61,8 +61,19 @@ fn bench_times_tracking_per_object_with_the_start_up_frame_apart() {
     let (clip, camera) = (teddy_clip(), fr3_camera_file());
     let args = ["bench", "--dataset", path_str(&clip), "--camera", path_str(&camera), "--passes", "1"];
     let more = ["--resolution", "qvga", "--graph-key-views", "0", "--tracking-first-frame", "0"];
-    let out = mrsmap(&[&args[..], &more[..], &["--tracking-config", path_str(&config_path)]].concat());
+    // A picture that would replace an input is refused before any run.
+    let tracking = ["--tracking-config", path_str(&config_path)];
+    let out = mrsmap(&[&args[..], &more[..], &tracking[..], &["--plot", path_str(&config_path)]].concat());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("is the tracker configuration, which this run reads"), "{err}");
+    assert!(out.stdout.is_empty(), "nothing ran: {}", String::from_utf8_lossy(&out.stdout));
+    let plot = dir.join("times.svg");
+    let out = mrsmap(&[&args[..], &more[..], &tracking[..], &["--plot", path_str(&plot)]].concat());
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let svg = std::fs::read_to_string(&plot).expect("the picture");
+    for panel in ["odometry QVGA 320×240", "tracking QVGA 320×240, teddy:", "tracking QVGA 320×240, teddy2:"] {
+        assert!(svg.contains(panel), "a panel for {panel}: {svg}");
+    }
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(
         text.contains("| object | threads | frames (estimated) | per frame median / p99 (ms) | scene map / registration median (ms) | first frame (ms) |"),

@@ -77,6 +77,53 @@ fn error_panel(svg: &mut Svg, x0: f64, stamps: &[f64], errors: &[f64], label: &s
     svg.legend(x0 + 10.0, 470.0, &[(ESTIMATE, "error per pose"), (MARK, "median and RMSE")]);
 }
 
+/// One run's time per frame, for [`times_svg`].
+#[derive(Debug, Clone)]
+pub struct TimeSeries {
+    /// What ran (e.g. "odometry VGA 640×480: map building + registration").
+    pub name: String,
+    /// Milliseconds per frame, in the order the frames ran.
+    pub ms: Vec<f64>,
+    /// Indices into `ms` where a new pass over the frames starts (the same frames again).
+    pub pass_starts: Vec<usize>,
+}
+
+/// The benchmark picture (`mrsmap bench --plot`): a panel per run, the time of every
+/// frame in the order they ran, the passes apart (dotted), median and p99 marked. A
+/// frame slow in every pass is slow by its data; a stretch slow in one pass only, by
+/// the machine.
+pub fn times_svg(title: &str, series: &[TimeSeries]) -> String {
+    const PANEL_HEIGHT: f64 = 150.0;
+    const PANEL_STEP: f64 = PANEL_HEIGHT + 75.0;
+    let height = 70.0 + PANEL_STEP * series.len().max(1) as f64;
+    let mut svg = Svg::new(820, height as u32, title);
+    for (k, s) in series.iter().enumerate() {
+        let y0 = 80.0 + PANEL_STEP * k as f64;
+        let points: Vec<(f64, f64)> = s.ms.iter().enumerate().map(|(i, &t)| (i as f64, t)).collect();
+        let mut bounds = points.clone();
+        bounds.push((0.0, 0.0));
+        let panel = Panel::new(60.0, y0, 620.0, PANEL_HEIGHT, &bounds, false);
+        panel.axes(&mut svg, "frame, in the order they ran (grey: the next pass over the same frames)", "ms");
+        let _ = writeln!(svg.body, "<text x=\"60\" y=\"{:.1}\">{}</text>", y0 - 8.0, escape(&s.name));
+        let top = panel.y.1;
+        for &start in &s.pass_starts {
+            let x = start as f64 - 0.5;
+            panel.dashed(&mut svg, &[(x, 0.0), (x, top)], "#999");
+        }
+        panel.line(&mut svg, &points, ESTIMATE, 1.0);
+        if s.ms.is_empty() {
+            continue;
+        }
+        let last = points[points.len() - 1].0;
+        for (q, name) in [(0.5, "median"), (0.99, "p99")] {
+            let y = crate::app::report::percentile(&s.ms, q);
+            panel.dashed(&mut svg, &[(0.0, y), (last, y)], MARK);
+            panel.margin_text(&mut svg, y, &format!("{name} {y:.2}"));
+        }
+    }
+    svg.finish()
+}
+
 /// The two axes along which `points` extend most, in axis order.
 fn widest_axes(points: &[Vector3<f64>]) -> (usize, usize) {
     let extent = |i: usize| {
@@ -342,5 +389,21 @@ mod tests {
         let svg = rpe_svg("rpe", &stamps[..19], &errors);
         assert!(svg.contains("max 4.00 at 0.13 s"), "{svg}");
         assert_eq!(svg.matches("<svg").count(), 1);
+    }
+
+    #[test]
+    fn the_times_picture_has_a_panel_per_run_with_its_passes_and_quantiles() {
+        let run = |name: &str, ms: Vec<f64>, pass_starts: Vec<usize>| TimeSeries { name: name.into(), ms, pass_starts };
+        let series = [
+            run("odometry <VGA>", (0..20).map(|i| 5.0 + (i % 10) as f64 * 0.1).collect(), vec![10]),
+            run("tracking QVGA", vec![], vec![]),
+        ];
+        let svg = times_svg("bench\nprobe", &series);
+        assert!(svg.starts_with("<svg") && svg.ends_with("</svg>\n"));
+        assert!(svg.contains("odometry &lt;VGA&gt;") && svg.contains("tracking QVGA"));
+        assert!(svg.contains("median 5.40") && svg.contains("p99 5.90"), "{svg}");
+        // A polyline for the frames, one dashed line per pass start and per quantile.
+        assert_eq!(svg.matches("stroke-dasharray").count(), 3);
+        assert!(!svg.contains("NaN") && !svg.contains("inf"));
     }
 }

@@ -339,6 +339,13 @@ pub struct BenchArgs {
     /// Resolution factor λ of the maps (see `odometry --help`).
     #[arg(long, default_value_t = 0.01)]
     pub lambda: f64,
+    /// Also draw every frame's time into this SVG file: a panel per run (odometry at
+    /// each size, tracking per object and size), the frames in the order they ran, the
+    /// passes apart, median and p99 marked. A frame slow in every pass is slow by its
+    /// data; a slow stretch in one pass only is the machine's (another load, a slowed
+    /// core).
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
 }
 
 #[derive(Args)]

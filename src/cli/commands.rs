@@ -404,7 +404,7 @@ fn plot_title(metric: &str, est: &Path, gt: &Path) -> String {
     format!("{metric}\n{} against {}", est.display(), gt.display())
 }
 
-fn write_plot(path: &Path, svg: &str) -> Result<()> {
+pub(super) fn write_plot(path: &Path, svg: &str) -> Result<()> {
     mrsmap::io::atomic::write_whole(path, svg.as_bytes())
         .with_context(|| format!("writing the plot {}", path.display()))?;
     println!("plot: {}", path.display());
@@ -440,75 +440,6 @@ fn warn_if_out_of_order(path: &Path, trajectory: &Trajectory) {
             stamps[k]
         );
     }
-}
-
-/// `mrsmap bench`.
-pub fn bench(a: BenchArgs) -> Result<()> {
-    let job = app::bench::BenchJob {
-        dataset: a.dataset,
-        camera: a.camera,
-        frames: a.frames,
-        passes: a.passes,
-        threads: a.threads,
-        resolutions: a.resolution,
-        graph_key_views: a.graph_key_views,
-        params: odometry_params(a.lambda),
-    };
-    anyhow::ensure!(
-        a.frame_gap_ms.is_finite() && (0.0..=10_000.0).contains(&a.frame_gap_ms),
-        "--frame-gap-ms must be between 0 and 10000 ms, not {}",
-        a.frame_gap_ms
-    );
-    // Read before the odometry runs, so that a bad file is said at once.
-    let tracking = a.tracking_config.as_deref().map(mrsmap::io::tracker_config::read_tracker_config).transpose()?;
-    let threads = a.threads.unwrap_or_else(rayon::current_num_threads);
-    let before = app::capacity::probe(threads);
-    let cpu = app::bench::cpu_model().unwrap_or_else(|| "unknown".into());
-    let cpus = std::thread::available_parallelism().map_or_else(|_| "?".into(), |n| n.to_string());
-    println!("machine: {cpu}, {cpus} logical CPUs");
-    println!("compiled for: {}\n", app::bench::instruction_set());
-    let results = app::bench::run(&job)?;
-    app::bench::print(&results, threads);
-    if let Some(config) = &tracking {
-        let gap = std::time::Duration::from_secs_f64(a.frame_gap_ms * 1e-3);
-        let gap_note =
-            if gap.is_zero() { String::new() } else { format!(", {} ms idle before each frame", a.frame_gap_ms) };
-        println!(
-            "\n| tracking{gap_note} | object | threads | frames (estimated) | per frame median / p99 (ms) | scene map / registration median (ms) | first frame (ms) |"
-        );
-        println!("|---|---|---|---|---|---|---|");
-        for &res in &job.resolutions {
-            let half = res == app::bench::Resolution::Qvga;
-            let size = if half { "QVGA 320×240" } else { "VGA 640×480" };
-            let t = app::bench::tracking_ms(config, &job, a.tracking_first_frame, half, gap)?;
-            app::bench::print_tracking(&t, size, threads);
-        }
-    }
-    // No times without key views (`--graph-key-views 0`): nothing to print.
-    let (edges, ms) = app::bench::graph_step_ms(job.graph_key_views, 50);
-    if !ms.is_empty() {
-        println!(
-            "\npose-graph step (synthetic, {} key views, {edges} edges, 50 on-line steps): median {:.2} ms, p99 {:.2} ms",
-            job.graph_key_views,
-            app::report::percentile(&ms, 0.5),
-            app::report::percentile(&ms, 0.99)
-        );
-    }
-    let after = app::capacity::probe(threads);
-    println!(
-        "\nCPU now (a fixed arithmetic loop): one thread ran it in {:.1} ms before and {:.1} ms after the runs \
-         (docs/benchmarks.md has this machine's figure at a quiet moment; a larger one means a slowed \
-         core, and the figures above are slower in proportion)",
-        before.one_thread_ms, after.one_thread_ms
-    );
-    if threads > 1 {
-        println!(
-            "CPU capacity for {threads} threads (the loop on all threads against one): ×{:.2} before, ×{:.2} after \
-             ({threads} = every thread had a free core; less means other load took cores)",
-            before.parallel, after.parallel
-        );
-    }
-    Ok(())
 }
 
 /// `mrsmap demo`.

@@ -2,6 +2,7 @@
 
 mod args;
 mod args_live;
+mod bench;
 mod commands;
 
 use anyhow::Result;
@@ -180,7 +181,7 @@ pub fn run(command: Command) -> Result<ExitCode> {
         Command::Convert(c) => commands::convert(c),
         Command::Synth(a) => commands::synth(a),
         Command::Eval(c) => done(commands::eval(c)),
-        Command::Bench(a) => done(commands::bench(a)),
+        Command::Bench(a) => done(bench::bench(a)),
     }
 }
 
