@@ -89,7 +89,7 @@ pub struct TimeSeries {
 }
 
 /// The benchmark picture (`mrsmap bench --plot`): a panel per run, the time of every
-/// frame in the order they ran, the passes apart (dotted), median and p99 marked. A
+/// frame in the order they ran, the passes apart (grey), median and p99 marked. A
 /// frame slow in every pass is slow by its data; a stretch slow in one pass only, by
 /// the machine.
 pub fn times_svg(title: &str, series: &[TimeSeries]) -> String {
