@@ -63,6 +63,8 @@ pub struct BenchResult {
     pub total_ms: Vec<f64>,
     /// Registrations that failed.
     pub failures: usize,
+    /// Indices into the per-frame times where a pass after the first starts.
+    pub pass_starts: Vec<usize>,
 }
 
 struct Decoded {
@@ -97,8 +99,12 @@ fn run_one(
         register_ms: vec![],
         total_ms: vec![],
         failures: 0,
+        pass_starts: vec![],
     };
-    for _ in 0..job.passes {
+    for pass in 0..job.passes {
+        if pass > 0 {
+            r.pass_starts.push(r.total_ms.len());
+        }
         odometry.reset(Pose::identity());
         for (i, d) in frames.iter().enumerate() {
             let frame = RgbdFrame::new(d.stamp_ns, camera, &d.rgb, &d.depth)?;
@@ -293,6 +299,9 @@ pub struct TrackingTimes {
     /// The whole step per steady frame: every object, and the end of the frame (the
     /// motion that objects not seen follow).
     pub step_ms: Vec<f64>,
+    /// Indices into the steady frames' times (of every object, and of the step) where a
+    /// pass after the first starts.
+    pub pass_starts: Vec<usize>,
 }
 
 /// Prints the rows of [`tracking_ms`]'s times at one image `size`: one per object, and
@@ -362,14 +371,18 @@ pub fn tracking_ms(
     // instead of being handed to a pool thread (which, after an idle gap, may wake
     // late). rayon cannot release a thread from a pool it joined: the loop gets a
     // thread of its own. The models load on that pool too.
-    let timed = || -> Result<Vec<FrameTimes>> {
+    let timed = || -> Result<(Vec<FrameTimes>, Vec<usize>)> {
         let (pool, _) = super::dataset::thread_pool_on_this_thread(job.threads, config.pin_threads)?;
         let LoadedTracker { mut tracker, world_from_model, .. } =
             load_tracker(config, &pool, cam.width as usize, cam.height as usize)?;
         let tracker = &mut tracker;
         let mut out = StepOutput::new(tracker.len());
         let mut frames = Vec::new();
-        for _ in 0..job.passes {
+        let mut pass_starts = Vec::new();
+        for pass in 0..job.passes {
+            if pass > 0 {
+                pass_starts.push(frames.len());
+            }
             for (k, w) in world_from_model.iter().enumerate() {
                 tracker.reinitialise(k, &(start.inverse() * w));
             }
@@ -387,15 +400,17 @@ pub fn tracking_ms(
                 frames.push((objects, step_ms));
             }
         }
-        Ok(frames)
+        Ok((frames, pass_starts))
     };
-    let mut frames = std::thread::scope(|s| {
+    let (mut frames, pass_starts) = std::thread::scope(|s| {
         s.spawn(timed).join().map_err(|_| anyhow::anyhow!("the tracking benchmark's thread failed"))
     })??;
     if frames.len() < 2 {
         bail!("the tracking benchmark needs at least 2 frames (the first one is timed apart)");
     }
     let (first, _) = frames.remove(0);
+    // The start-up frame taken out shifts every later pass's start by one.
+    let pass_starts = pass_starts.iter().map(|&start| start - 1).collect();
     let objects = config
         .objects
         .iter()
@@ -409,7 +424,7 @@ pub fn tracking_ms(
             estimated: frames.iter().filter(|(f, _)| f[k].2).count(),
         })
         .collect();
-    Ok(TrackingTimes { objects, step_ms: frames.iter().map(|f| f.1).collect() })
+    Ok(TrackingTimes { objects, step_ms: frames.iter().map(|f| f.1).collect(), pass_starts })
 }
 
 #[cfg(test)]

@@ -44,7 +44,7 @@ pub fn bench(a: BenchArgs) -> Result<()> {
     println!("compiled for: {}\n", app::bench::instruction_set());
     let results = app::bench::run(&job)?;
     app::bench::print(&results, threads);
-    let mut series: Vec<TimeSeries> = results.iter().map(|r| odometry_series(r, job.passes)).collect();
+    let mut series: Vec<TimeSeries> = results.iter().map(odometry_series).collect();
     if let Some(config) = &tracking {
         let gap = std::time::Duration::from_secs_f64(a.frame_gap_ms * 1e-3);
         let gap_note =
@@ -58,7 +58,7 @@ pub fn bench(a: BenchArgs) -> Result<()> {
             let size = if half { "QVGA 320×240" } else { "VGA 640×480" };
             let t = app::bench::tracking_ms(config, &job, a.tracking_first_frame, half, gap)?;
             app::bench::print_tracking(&t, size, threads);
-            series.extend(tracking_series(&t, size, job.passes));
+            series.extend(tracking_series(&t, size));
         }
     }
     // No times without key views (`--graph-key-views 0`): nothing to print.
@@ -96,29 +96,23 @@ pub fn bench(a: BenchArgs) -> Result<()> {
     Ok(())
 }
 
-/// The odometry frames of one resolution as they ran: each pass gives all frames but
-/// its first (`app::bench::run`).
-fn odometry_series(r: &BenchResult, passes: usize) -> TimeSeries {
-    let per_pass = r.total_ms.len() / passes.max(1);
+/// The odometry frames of one resolution as they ran.
+fn odometry_series(r: &BenchResult) -> TimeSeries {
     TimeSeries {
         name: format!("odometry {} {}×{}: map building + registration", r.label, r.width, r.height),
         ms: r.total_ms.clone(),
-        pass_starts: (1..passes).map(|p| p * per_pass).collect(),
+        pass_starts: r.pass_starts.clone(),
     }
 }
 
-/// The tracked frames of each object at one size: the very first frame is timed apart
-/// (`app::bench::tracking_ms`), so the first pass gives one frame fewer than the others.
-fn tracking_series(t: &TrackingTimes, size: &str, passes: usize) -> Vec<TimeSeries> {
+/// The tracked frames of each object at one size, as they ran.
+fn tracking_series(t: &TrackingTimes, size: &str) -> Vec<TimeSeries> {
     t.objects
         .iter()
-        .map(|o| {
-            let per_pass = (o.steady_ms.len() + 1) / passes.max(1);
-            TimeSeries {
-                name: format!("tracking {size}, {}: the step for the object", o.name),
-                ms: o.steady_ms.clone(),
-                pass_starts: (1..passes).map(|p| p * per_pass - 1).collect(),
-            }
+        .map(|o| TimeSeries {
+            name: format!("tracking {size}, {}: the step for the object", o.name),
+            ms: o.steady_ms.clone(),
+            pass_starts: t.pass_starts.clone(),
         })
         .collect()
 }
