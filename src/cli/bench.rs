@@ -88,7 +88,7 @@ pub fn bench(a: BenchArgs) -> Result<()> {
     if let Some(path) = &a.plot {
         let title = format!(
             "mrsmap bench: {cpu}, {threads} threads, {} passes\nprobe loop {:.1} ms before, {:.1} ms after the runs \
-             (larger than this machine's quiet figure: a slowed core); capacity ×{:.2} / ×{:.2}",
+             (a slowed core reads above its quiet figure); capacity ×{:.2} / ×{:.2}",
             job.passes, before.one_thread_ms, after.one_thread_ms, before.parallel, after.parallel
         );
         write_plot(path, &app::plot::times_svg(&title, &series))?;
