@@ -4,100 +4,164 @@
 # binary under callgrind on one thread and prints, per frame, the stages' instruction
 # counts (inclusive: a stage counts all it calls).
 #
-#   scripts/profile.sh tracking [--qvga] [--frames N] [--first-frame F] [--keep FILE]
-#   scripts/profile.sh odometry [--qvga] [--frames N] [--keep FILE]
+#   scripts/profile.sh tracking [--qvga] [--frames N] [--first-frame F] [--against REV] [--keep FILE]
+#   scripts/profile.sh odometry [--qvga] [--frames N] [--against REV] [--keep FILE]
 #
 # tracking: the teddy of robot_config/tracker.toml through fr3_teddy_first200 from frame
 #   F (default 100), started at ground truth, N frames (default 30): scene map,
 #   registration with the quality checks, and of that the quality score.
 # odometry: the first N frames (default 21) of fr3_teddy_first200, each registered to
 #   the previous one: map building per frame, registration per frame pair.
+# --against REV: the same run of git revision REV too (built in a worktree under
+#   target/profile-against/, removed at the end; the build is kept there for the next
+#   comparison), side by side with this tree and the change in per cent: how a change
+#   to the code is judged.
+# --keep FILE: keep this tree's callgrind output (callgrind_annotate FILE shows it all).
 #
 # Needs valgrind (Debian: apt-get install valgrind) and ../shared/data/tum. Takes about
-# 4 s per VGA frame. --keep FILE keeps the callgrind output (callgrind_annotate FILE
-# shows every function). Counts of one build differ from run to run by well under 0.1 %.
+# 4 s per VGA frame and run. Counts of one build vary between runs by well under 0.1 %.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+root=$PWD
 
 usage() {
-    local text; text=$(sed -n "2,18p" "$0" | sed "s/^# \\{0,1\\}//")
+    local text
+    text=$(sed -n '2,22p' "$0" | sed 's/^# \{0,1\}//')
     if [[ ${1:-0} -eq 0 ]]; then echo "$text"; else echo "$text" >&2; fi
     exit "${1:-0}"
 }
 [[ $# -ge 1 ]] || usage 2
-mode=$1; shift
-case $mode in tracking | odometry) ;; -h | --help) usage 0 ;; *) echo "profile.sh: unknown mode '$mode' (tracking or odometry)" >&2; usage 2 ;; esac
-qvga=(); frames=""; first=100; keep=""
+mode=$1
+shift
+case $mode in
+    tracking | odometry) ;;
+    -h | --help) usage 0 ;;
+    *) echo "profile.sh: unknown mode '$mode' (tracking or odometry)" >&2; usage 2 ;;
+esac
+qvga=(); frames=""; first=100; keep=""; against=""
 while [[ $# -gt 0 ]]; do
     case $1 in
         --qvga) qvga=(--qvga); shift ;;
         --frames) frames=${2:?--frames needs a number}; shift 2 ;;
         --first-frame) first=${2:?--first-frame needs a number}; shift 2 ;;
+        --against) against=${2:?--against needs a git revision}; shift 2 ;;
         --keep) keep=${2:?--keep needs a file}; shift 2 ;;
         -h | --help) usage 0 ;;
         *) echo "profile.sh: unknown option '$1'" >&2; usage 2 ;;
     esac
 done
+[[ $mode == tracking ]] && frames=${frames:-30} || frames=${frames:-21}
 size=VGA
 [[ ${#qvga[@]} -eq 0 ]] || size=QVGA
 for tool in valgrind callgrind_annotate; do
     command -v "$tool" > /dev/null || { echo "profile.sh: $tool not found (Debian: apt-get install valgrind)" >&2; exit 1; }
 done
-dataset=../shared/data/tum/fr3_teddy_first200
+dataset=$root/../shared/data/tum/fr3_teddy_first200
 [[ -d $dataset ]] || { echo "profile.sh: $dataset not found (the TUM data of ../shared)" >&2; exit 1; }
-cargo build --release --quiet
+if [[ -n $against ]]; then
+    rev=$(git rev-parse --verify --quiet "$against^{commit}") ||
+        { echo "profile.sh: '$against' is not a git revision of this repository" >&2; exit 1; }
+fi
 work=$(mktemp -d)
-trap 'rm -rf "$work"' EXIT
-out=${keep:-$work/callgrind.out}
+tree=""
+cleanup() {
+    [[ -z $tree || ! -d $tree ]] || git worktree remove --force "$tree"
+    rm -rf "$work"
+}
+trap cleanup EXIT
 
-# Inclusive instructions of the function whose name ends in $1 (callgrind_annotate lists a
-# function once per file it has code from; the largest figure is the function's own).
-# A name not found (renamed in the code?) stops the script rather than count zero.
+# Inclusive instructions in profile $1 of the function whose name ends in $2
+# (callgrind_annotate lists a function once per file it has code from; the largest figure
+# is the function's own). A name not found (renamed in the code?) stops the script
+# rather than count zero.
 inclusive() {
     local count
-    count=$(callgrind_annotate --inclusive=yes "$out" 2> /dev/null |
-        awk -v f="$1" '$0 ~ ("::" f "( \\[.*)?$") { gsub(",", "", $1); if ($1 + 0 > m) m = $1 + 0 } END { printf "%.0f\n", m }')
+    count=$(callgrind_annotate --inclusive=yes "$1" 2> /dev/null |
+        awk -v f="$2" '$0 ~ ("::" f "( \\[.*)?$") { gsub(",", "", $1); if ($1 + 0 > m) m = $1 + 0 } END { printf "%.0f\n", m }')
     if [[ $count == 0 ]]; then
-        echo "profile.sh: no function named $1 in the profile (renamed? update this script)" >&2
+        echo "profile.sh: no function named $2 in the profile $1 (renamed? update this script)" >&2
         exit 1
     fi
     echo "$count"
 }
-per_frame() { awk -v n="$1" -v d="$2" 'BEGIN { printf "%7.2f M", n / d / 1e6 }'; }
-# The sum of two per-frame figures.
-per_frame2() { awk -v a="$1" -v b="$2" -v c="$3" -v d="$4" 'BEGIN { printf "%7.2f M", (a / b + c / d) / 1e6 }'; }
+# $1 / $2 + $3 / $4 (instructions per frame).
+per_frame() { awk -v a="$1" -v b="$2" -v c="${3:-0}" -v d="${4:-1}" 'BEGIN { printf "%.0f", a / b + c / d }'; }
 
-if [[ $mode == tracking ]]; then
-    frames=${frames:-30}
-    # One thread; the model path made absolute, as the copy is elsewhere.
-    sed -e 's/^# *threads = [0-9]*/threads = 1/' -e "s|\"\\.\\./models/|\"$PWD/models/|" \
-        robot_config/tracker.toml > "$work/tracker.toml"
-    valgrind --tool=callgrind --callgrind-out-file="$out" ./target/release/mrsmap track \
-        --config "$work/tracker.toml" --dataset "$dataset" --camera robot_config/cameras/tum_fr3.toml \
-        --first-frame "$first" --max-frames "$frames" --start-at-ground-truth \
-        --trajectory "$work/trajectory.txt" "${qvga[@]}" > "$work/log.txt" 2>&1 ||
-        { cat "$work/log.txt" >&2; exit 1; }
-    n=$(grep -cv '^#' "$work/trajectory.txt")
-    scene=$(inclusive Tracker::build_scene)
-    registration=$(inclusive Tracker::register_object)
-    quality=$(inclusive MatchScratch::score)
-    echo "tracking $size, teddy frames $first-$((first + n - 1)) ($n), one thread: instructions per frame"
-    echo "  step (scene map + registration) $(per_frame2 "$scene" "$n" "$registration" "$n")"
-    echo "  scene map                       $(per_frame "$scene" "$n")"
-    echo "  registration with the quality   $(per_frame "$registration" "$n")"
-    echo "    of which the quality score    $(per_frame "$quality" "$n")"
-else
-    frames=${frames:-21}
-    valgrind --tool=callgrind --callgrind-out-file="$out" ./target/release/mrsmap odometry \
-        --dataset "$dataset" --camera robot_config/cameras/tum_fr3.toml --out "$work/trajectory.txt" \
-        --threads 1 --max-frames "$frames" "${qvga[@]}" > "$work/log.txt" 2>&1 ||
-        { cat "$work/log.txt" >&2; exit 1; }
-    n=$(grep -cv '^#' "$work/trajectory.txt")
-    build=$(inclusive MapBuilder::build_region)
-    registration=$(inclusive registration::register)
-    echo "odometry $size, teddy frames 0-$((n - 1)) ($n), one thread: instructions per frame"
-    echo "  map building + registration     $(per_frame2 "$build" "$n" "$registration" $((n - 1)))"
-    echo "  map building                    $(per_frame "$build" "$n")"
-    echo "  registration                    $(per_frame "$registration" $((n - 1)))"
+# Profiles the tree $1 with its release binary into $2; prints "frames" and each stage's
+# instructions per frame, one "name value" line each.
+measure() {
+    local tree=$1 out=$2 log=$work/log.txt traj=$work/trajectory.txt n
+    if [[ $mode == tracking ]]; then
+        # One thread; the model path made absolute, as the copy is elsewhere.
+        sed -e 's/^# *threads = [0-9]*/threads = 1/' -e "s|\"\\.\\./models/|\"$tree/models/|" \
+            "$tree/robot_config/tracker.toml" > "$work/tracker.toml"
+        (cd "$tree" && valgrind --tool=callgrind --callgrind-out-file="$out" ./target/release/mrsmap track \
+            --config "$work/tracker.toml" --dataset "$dataset" --camera robot_config/cameras/tum_fr3.toml \
+            --first-frame "$first" --max-frames "$frames" --start-at-ground-truth \
+            --trajectory "$traj" "${qvga[@]}") > "$log" 2>&1 || { cat "$log" >&2; exit 1; }
+        n=$(grep -cv '^#' "$traj")
+        local scene registration quality
+        scene=$(inclusive "$out" Tracker::build_scene)
+        registration=$(inclusive "$out" Tracker::register_object)
+        quality=$(inclusive "$out" MatchScratch::score)
+        echo "frames $n"
+        echo "step $(per_frame "$scene" "$n" "$registration" "$n")"
+        echo "scene $(per_frame "$scene" "$n")"
+        echo "registration $(per_frame "$registration" "$n")"
+        echo "quality $(per_frame "$quality" "$n")"
+    else
+        (cd "$tree" && valgrind --tool=callgrind --callgrind-out-file="$out" ./target/release/mrsmap odometry \
+            --dataset "$dataset" --camera robot_config/cameras/tum_fr3.toml --out "$traj" \
+            --threads 1 --max-frames "$frames" "${qvga[@]}") > "$log" 2>&1 || { cat "$log" >&2; exit 1; }
+        n=$(grep -cv '^#' "$traj")
+        local build registration
+        build=$(inclusive "$out" MapBuilder::build_region)
+        registration=$(inclusive "$out" registration::register)
+        echo "frames $n"
+        echo "step $(per_frame "$build" "$n" "$registration" $((n - 1)))"
+        echo "build $(per_frame "$build" "$n")"
+        echo "registration $(per_frame "$registration" $((n - 1)))"
+    fi
+}
+
+cargo build --release --quiet
+if [[ -n $against ]]; then
+    echo "profile.sh: building $against (${rev:0:10}) in a temporary worktree" >&2
+    # At a fixed place, so that cargo rebuilds only what changed since the last comparison.
+    tree=$root/target/profile-against/tree
+    [[ ! -e $tree ]] || git worktree remove --force "$tree" 2> /dev/null || rm -rf "$tree"
+    git worktree prune
+    git worktree add --quiet --detach "$tree" "$rev"
+    (cd "$tree" && CARGO_TARGET_DIR=$root/target/profile-against/build cargo build --release --quiet)
+    mkdir -p "$tree/target/release"
+    ln -s "$root/target/profile-against/build/release/mrsmap" "$tree/target/release/mrsmap"
+    measure "$tree" "$work/against.out" > "$work/against.txt"
 fi
+measure "$root" "${keep:-$work/callgrind.out}" > "$work/this.txt"
+
+value() { awk -v k="$1" '$1 == k { print $2 }' "$2"; }
+n=$(value frames "$work/this.txt")
+if [[ $mode == tracking ]]; then
+    echo "tracking $size, teddy frames $first-$((first + n - 1)) ($n), one thread: instructions per frame"
+    stages=(step "step (scene map + registration)" scene "scene map" registration "registration with the quality"
+        quality "  of which the quality score")
+else
+    echo "odometry $size, teddy frames 0-$((n - 1)) ($n), one thread: instructions per frame (registration per pair)"
+    stages=(step "map building + registration" build "map building" registration "registration")
+fi
+if [[ -n $against ]]; then
+    printf "  %-33s %12s %12s %9s\n" "" "${against:0:12}" "this tree" "change"
+    m=$(value frames "$work/against.txt")
+    [[ $m == "$n" ]] || echo "  note: $against ran $m frames (a registration failed or the data differ), this tree $n"
+fi
+for ((i = 0; i < ${#stages[@]}; i += 2)); do
+    now=$(value "${stages[i]}" "$work/this.txt")
+    if [[ -n $against ]]; then
+        then=$(value "${stages[i]}" "$work/against.txt")
+        awk -v l="${stages[i + 1]}" -v a="$then" -v b="$now" \
+            'BEGIN { printf "  %-33s %10.2f M %10.2f M %+8.2f %%\n", l, a / 1e6, b / 1e6, 100 * (b - a) / a }'
+    else
+        awk -v l="${stages[i + 1]}" -v b="$now" 'BEGIN { printf "  %-33s %10.2f M\n", l, b / 1e6 }'
+    fi
+done
 [[ -z $keep ]] || echo "callgrind output: $keep (callgrind_annotate $keep)"
