@@ -50,7 +50,11 @@ while [[ $# -gt 0 ]]; do
         *) echo "profile.sh: unknown option '$1'" >&2; usage 2 ;;
     esac
 done
-[[ $mode == tracking ]] && frames=${frames:-30} || frames=${frames:-21}
+if [[ $mode == tracking ]]; then frames=${frames:-30}; else frames=${frames:-21}; fi
+# Odometry registers frame pairs: it needs two frames.
+[[ $frames =~ ^[0-9]+$ && $frames -ge 1 && ($mode == tracking || $frames -ge 2) ]] ||
+    { echo "profile.sh: --frames $frames: give a whole number of frames, at least $([[ $mode == tracking ]] && echo 1 || echo 2)" >&2; exit 2; }
+[[ $first =~ ^[0-9]+$ ]] || { echo "profile.sh: --first-frame $first: give a frame index (0, 1, ...)" >&2; exit 2; }
 size=VGA
 [[ ${#qvga[@]} -eq 0 ]] || size=QVGA
 for tool in valgrind callgrind_annotate; do
@@ -63,9 +67,9 @@ if [[ -n $against ]]; then
         { echo "profile.sh: '$against' is not a git revision of this repository" >&2; exit 1; }
 fi
 work=$(mktemp -d)
-tree=""
+against_tree=""
 cleanup() {
-    [[ -z $tree || ! -d $tree ]] || git worktree remove --force "$tree"
+    [[ -z $against_tree || ! -d $against_tree ]] || git worktree remove --force "$against_tree" || true
     rm -rf "$work"
 }
 trap cleanup EXIT
@@ -87,19 +91,33 @@ inclusive() {
 # $1 / $2 + $3 / $4 (instructions per frame).
 per_frame() { awk -v a="$1" -v b="$2" -v c="${3:-0}" -v d="${4:-1}" 'BEGIN { printf "%.0f", a / b + c / d }'; }
 
+# The run under callgrind in tree $1 failed: its own messages, without valgrind's.
+failed() {
+    grep -v '^==[0-9]*==' "$work/log.txt" >&2 || true
+    echo "profile.sh: the run under callgrind failed (in $1)" >&2
+    exit 1
+}
+# Frames the run processed, as its log says ("tracking N frames", "odometry N frames").
+frames_run() {
+    local count
+    count=$(grep -oE "^$mode [0-9]+ frames" "$work/log.txt" | awk '{ print $2 }')
+    [[ ${count:-0} -gt 0 ]] || { echo "profile.sh: the run processed no frame (past the data's end?)" >&2; exit 1; }
+    echo "$count"
+}
+
 # Profiles the tree $1 with its release binary into $2; prints "frames" and each stage's
 # instructions per frame, one "name value" line each.
 measure() {
-    local tree=$1 out=$2 log=$work/log.txt traj=$work/trajectory.txt n
+    local dir=$1 out=$2 log=$work/log.txt n
     if [[ $mode == tracking ]]; then
         # One thread; the model path made absolute, as the copy is elsewhere.
-        sed -e 's/^# *threads = [0-9]*/threads = 1/' -e "s|\"\\.\\./models/|\"$tree/models/|" \
-            "$tree/robot_config/tracker.toml" > "$work/tracker.toml"
-        (cd "$tree" && valgrind --tool=callgrind --callgrind-out-file="$out" ./target/release/mrsmap track \
+        sed -e 's/^# *threads = [0-9]*/threads = 1/' -e "s|\"\\.\\./models/|\"$dir/models/|" \
+            "$dir/robot_config/tracker.toml" > "$work/tracker.toml"
+        (cd "$dir" && valgrind --tool=callgrind --callgrind-out-file="$out" ./target/release/mrsmap track \
             --config "$work/tracker.toml" --dataset "$dataset" --camera robot_config/cameras/tum_fr3.toml \
             --first-frame "$first" --max-frames "$frames" --start-at-ground-truth \
-            --trajectory "$traj" "${qvga[@]}") > "$log" 2>&1 || { cat "$log" >&2; exit 1; }
-        n=$(grep -cv '^#' "$traj")
+            "${qvga[@]}") > "$log" 2>&1 || failed "$dir"
+        n=$(frames_run)
         local scene registration quality
         scene=$(inclusive "$out" Tracker::build_scene)
         registration=$(inclusive "$out" Tracker::register_object)
@@ -110,10 +128,10 @@ measure() {
         echo "registration $(per_frame "$registration" "$n")"
         echo "quality $(per_frame "$quality" "$n")"
     else
-        (cd "$tree" && valgrind --tool=callgrind --callgrind-out-file="$out" ./target/release/mrsmap odometry \
-            --dataset "$dataset" --camera robot_config/cameras/tum_fr3.toml --out "$traj" \
-            --threads 1 --max-frames "$frames" "${qvga[@]}") > "$log" 2>&1 || { cat "$log" >&2; exit 1; }
-        n=$(grep -cv '^#' "$traj")
+        (cd "$dir" && valgrind --tool=callgrind --callgrind-out-file="$out" ./target/release/mrsmap odometry \
+            --dataset "$dataset" --camera robot_config/cameras/tum_fr3.toml --out "$work/trajectory.txt" \
+            --threads 1 --max-frames "$frames" "${qvga[@]}") > "$log" 2>&1 || failed "$dir"
+        n=$(frames_run)
         local build registration
         build=$(inclusive "$out" MapBuilder::build_region)
         registration=$(inclusive "$out" registration::register)
@@ -128,14 +146,14 @@ cargo build --release --quiet
 if [[ -n $against ]]; then
     echo "profile.sh: building $against (${rev:0:10}) in a temporary worktree" >&2
     # At a fixed place, so that cargo rebuilds only what changed since the last comparison.
-    tree=$root/target/profile-against/tree
-    [[ ! -e $tree ]] || git worktree remove --force "$tree" 2> /dev/null || rm -rf "$tree"
+    against_tree=$root/target/profile-against/tree
+    [[ ! -e $against_tree ]] || git worktree remove --force "$against_tree" 2> /dev/null || rm -rf "$against_tree"
     git worktree prune
-    git worktree add --quiet --detach "$tree" "$rev"
-    (cd "$tree" && CARGO_TARGET_DIR=$root/target/profile-against/build cargo build --release --quiet)
-    mkdir -p "$tree/target/release"
-    ln -s "$root/target/profile-against/build/release/mrsmap" "$tree/target/release/mrsmap"
-    measure "$tree" "$work/against.out" > "$work/against.txt"
+    git worktree add --quiet --detach "$against_tree" "$rev"
+    (cd "$against_tree" && CARGO_TARGET_DIR=$root/target/profile-against/build cargo build --release --quiet)
+    mkdir -p "$against_tree/target/release"
+    ln -s "$root/target/profile-against/build/release/mrsmap" "$against_tree/target/release/mrsmap"
+    measure "$against_tree" "$work/against.out" > "$work/against.txt"
 fi
 measure "$root" "${keep:-$work/callgrind.out}" > "$work/this.txt"
 
