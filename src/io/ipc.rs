@@ -19,7 +19,7 @@ use super::wire::{ObjectDetection, ObjectPose, WireFrame};
 use iceoryx2::node::Node;
 use iceoryx2::port::writer::EntryHandleMutError;
 use iceoryx2::prelude::*;
-use iceoryx2::service::builder::blackboard::BlackboardCreateError;
+use iceoryx2::service::builder::blackboard::{BlackboardCreateError, BlackboardOpenError};
 use iceoryx2::service::builder::publish_subscribe as publish_subscribe_builder;
 use iceoryx2::service::port_factory::{blackboard, event, publish_subscribe};
 
@@ -306,16 +306,7 @@ pub fn publish_poses(
     if initial.len() > MAX_OBJECTS as usize {
         return Err(IpcError::new(format!("pose blackboard {name}"), format!("more than {MAX_OBJECTS} objects")));
     }
-    let mut builder =
-        node.service_builder(&service_name(name)?).blackboard_creator::<u32>().max_readers(POSES_MAX_READERS);
-    for (k, pose) in initial.iter().enumerate() {
-        builder = builder.add::<ObjectPose>(k as u32, *pose);
-    }
-    let service = match builder.create() {
-        Ok(service) => service,
-        Err(BlackboardCreateError::AlreadyExists) => open_poses(node, name)?,
-        Err(e) => return Err(IpcError::new(format!("creating pose blackboard {name}"), e)),
-    };
+    let service = create_or_open_poses(node, name, initial)?;
     let writer = service.writer_builder().create().map_err(|e| {
         let what = format!(
             "writing poses on {name} (another tracker publishes there: stop it, or choose another [poses] service)"
@@ -336,6 +327,52 @@ pub fn publish_poses(
     Ok(Ok(PosePorts { entries, writer, service }))
 }
 
+/// How long [`create_or_open_poses`] retries a blackboard that is being removed.
+const BLACKBOARD_REMOVAL_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(2);
+
+/// Creates the pose blackboard `name` with the entries `initial`, or opens it where it
+/// exists. Its last client can let go between the two: iceoryx2 then removes it, its
+/// data segments before its name, and the opening finds it half gone
+/// (`ServiceInCorruptedState`, `IsMarkedForDestruction`, `DoesNotExist`; a creation at
+/// that moment can fail likewise). Both are tried again until the removal is over; a
+/// blackboard still in such a state after [`BLACKBOARD_REMOVAL_TIMEOUT`] is an error.
+fn create_or_open_poses(node: &Node<Ipc>, name: &str, initial: &[ObjectPose]) -> Result<PoseBlackboard, IpcError> {
+    let started = std::time::Instant::now();
+    let service_name = service_name(name)?;
+    let retry = || {
+        std::thread::sleep(std::time::Duration::from_millis(1));
+        started.elapsed() < BLACKBOARD_REMOVAL_TIMEOUT
+    };
+    loop {
+        let mut builder =
+            node.service_builder(&service_name).blackboard_creator::<u32>().max_readers(POSES_MAX_READERS);
+        for (k, pose) in initial.iter().enumerate() {
+            builder = builder.add::<ObjectPose>(k as u32, *pose);
+        }
+        match builder.create() {
+            Ok(service) => return Ok(service),
+            Err(BlackboardCreateError::AlreadyExists) => {}
+            Err(
+                BlackboardCreateError::ServiceInCorruptedState | BlackboardCreateError::IsBeingCreatedByAnotherInstance,
+            ) if retry() => continue,
+            Err(e) => return Err(IpcError::new(format!("creating pose blackboard {name}"), e)),
+        }
+        match open_blackboard(node, &service_name) {
+            Ok(service) => return Ok(service),
+            Err(
+                BlackboardOpenError::ServiceInCorruptedState
+                | BlackboardOpenError::IsMarkedForDestruction
+                | BlackboardOpenError::DoesNotExist,
+            ) if retry() => {}
+            Err(e) => return Err(IpcError::new(format!("opening pose blackboard {name}"), e)),
+        }
+    }
+}
+
+fn open_blackboard(node: &Node<Ipc>, name: &ServiceName) -> Result<PoseBlackboard, BlackboardOpenError> {
+    node.service_builder(name).blackboard_opener::<u32>().max_readers(POSES_MAX_READERS).open()
+}
+
 /// Why the pose blackboard that clients keep from an earlier tracker cannot be written.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 pub enum PosesKept {
@@ -349,11 +386,7 @@ pub enum PosesKept {
 
 /// Opens the pose blackboard `name`.
 pub fn open_poses(node: &Node<Ipc>, name: &str) -> Result<PoseBlackboard, IpcError> {
-    node.service_builder(&service_name(name)?)
-        .blackboard_opener::<u32>()
-        .max_readers(POSES_MAX_READERS)
-        .open()
-        .map_err(|e| IpcError::new(format!("opening pose blackboard {name}"), e))
+    open_blackboard(node, &service_name(name)?).map_err(|e| IpcError::new(format!("opening pose blackboard {name}"), e))
 }
 
 /// Nanoseconds since the Unix epoch (the stamps in the wire messages).
