@@ -97,59 +97,65 @@ per_frame() { awk -v a="$1" -v b="$2" -v c="${3:-0}" -v d="${4:-1}" 'BEGIN { pri
 # $1 - $2.
 minus() { awk -v a="$1" -v b="$2" 'BEGIN { printf "%.0f", a - b }'; }
 
+log=$work/log.txt
 # The run under callgrind in tree $1 failed: its own messages, without valgrind's.
 failed() {
-    grep -v '^==[0-9]*==' "$work/log.txt" >&2 || true
+    grep -v '^==[0-9]*==' "$log" >&2 || true
     echo "profile.sh: the run under callgrind failed (in $1)" >&2
     exit 1
 }
 # Frames the run processed, as its log says ("tracking N frames", "odometry N frames").
 frames_run() {
     local count
-    count=$(grep -oE "^$mode [0-9]+ frames" "$work/log.txt" | awk '{ print $2 }')
+    count=$(grep -oE "^$mode [0-9]+ frames" "$log" | awk '{ print $2 }')
     [[ ${count:-0} -gt 0 ]] || { echo "profile.sh: the run processed no frame (past the data's end?)" >&2; exit 1; }
     echo "$count"
 }
+# Runs the release binary of tree $1 under callgrind, its profile into $2, with the
+# arguments that follow; its output goes to $log.
+run_callgrind() {
+    local dir=$1 out=$2
+    shift 2
+    (cd "$dir" && valgrind --tool=callgrind --callgrind-out-file="$out" ./target/release/mrsmap "$@") > "$log" 2>&1 ||
+        failed "$dir"
+}
 
-# Profiles the tree $1 with its release binary into $2; prints "frames" and each stage's
-# instructions per frame, one "name value" line each.
+# Profiles the tree $1 with its release binary into $2; prints "frames", "rays" and each
+# stage's instructions per frame, one "name value" line each.
 measure() {
-    local dir=$1 out=$2 log=$work/log.txt n
+    local dir=$1 out=$2 n rays
     if [[ $mode == tracking ]]; then
         # One thread; the model path made absolute, as the copy is elsewhere.
         sed -e 's/^# *threads = [0-9]*/threads = 1/' -e "s|\"\\.\\./models/|\"$dir/models/|" \
             "$dir/robot_config/tracker.toml" > "$work/tracker.toml"
-        (cd "$dir" && valgrind --tool=callgrind --callgrind-out-file="$out" ./target/release/mrsmap track \
-            --config "$work/tracker.toml" --dataset "$dataset" --camera robot_config/cameras/tum_fr3.toml \
-            --first-frame "$first" --max-frames "$frames" --start-at-ground-truth \
-            "${qvga[@]}") > "$log" 2>&1 || failed "$dir"
-        n=$(frames_run)
-        local scene registration quality rays
-        # The first frame's ray table is start-up work (once per camera), not the step's.
-        rays=$(inclusive "$out" RayTable::ensure)
+        run_callgrind "$dir" "$out" track --config "$work/tracker.toml" --dataset "$dataset" \
+            --camera robot_config/cameras/tum_fr3.toml --first-frame "$first" --max-frames "$frames" \
+            --start-at-ground-truth "${qvga[@]}"
+    else
+        run_callgrind "$dir" "$out" odometry --dataset "$dataset" --camera robot_config/cameras/tum_fr3.toml \
+            --out "$work/trajectory.txt" --threads 1 --max-frames "$frames" "${qvga[@]}"
+    fi
+    n=$(frames_run)
+    # The first frame's ray table is start-up work (once per camera), not the step's.
+    rays=$(inclusive "$out" RayTable::ensure)
+    echo "frames $n"
+    echo "rays $rays"
+    if [[ $mode == tracking ]]; then
+        local scene registration quality
         scene=$(minus "$(inclusive "$out" Tracker::build_scene)" "$rays")
         registration=$(inclusive "$out" Tracker::register_object)
         quality=$(inclusive "$out" MatchScratch::score)
-        echo "frames $n"
         echo "step $(per_frame "$scene" "$n" "$registration" "$n")"
         echo "scene $(per_frame "$scene" "$n")"
         echo "registration $(per_frame "$registration" "$n")"
         echo "quality $(per_frame "$quality" "$n")"
-        echo "rays $rays"
     else
-        (cd "$dir" && valgrind --tool=callgrind --callgrind-out-file="$out" ./target/release/mrsmap odometry \
-            --dataset "$dataset" --camera robot_config/cameras/tum_fr3.toml --out "$work/trajectory.txt" \
-            --threads 1 --max-frames "$frames" "${qvga[@]}") > "$log" 2>&1 || failed "$dir"
-        n=$(frames_run)
-        local build registration rays
-        rays=$(inclusive "$out" RayTable::ensure)
+        local build registration
         build=$(minus "$(inclusive "$out" MapBuilder::build_region)" "$rays")
         registration=$(inclusive "$out" registration::register)
-        echo "frames $n"
         echo "step $(per_frame "$build" "$n" "$registration" $((n - 1)))"
         echo "build $(per_frame "$build" "$n")"
         echo "registration $(per_frame "$registration" $((n - 1)))"
-        echo "rays $rays"
     fi
 }
 
