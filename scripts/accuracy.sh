@@ -7,7 +7,8 @@
 # authors' original implementation measured on this machine, max no higher) and fails
 # only on a regression beyond the recorded guard values (docs/evaluation.md): the
 # targets themselves are reported, not asserted, so a miss is visible rather than hidden.
-# Then cross-checks `mrsmap eval` against evo on one trajectory (needs `pip install evo`).
+# Then cross-checks `mrsmap eval` against evo on one trajectory (needs `pip install evo`),
+# and prints the teddy's odometry step lengths against the ground truth by speed.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 DATA=${MRSMAP_TUM:-../shared/data/tum}
@@ -113,4 +114,6 @@ if echo "$r" | awk -F'|' '{exit !($4 < 0.9 || $5 < 0.8 || $7 > 0)}'; then
   echo "  REGRESSION: guard is precision >= 0.9, recall >= 0.8, no failure farther than 200 mm missed"; status=1
 fi
 python3 scripts/evo_crosscheck.py "$BIN" "$DATA/fr3_teddy_first200/groundtruth.txt" "$OUT/fr3_teddy_first200.txt"
+echo "odometry step lengths against the ground truth, fr3_teddy_first200 (docs/evaluation.md):"
+python3 scripts/step_lengths.py "$DATA/fr3_teddy_first200/groundtruth.txt" "$OUT/fr3_teddy_first200.txt" | sed 's/^/  /'
 exit $status
