@@ -24,6 +24,7 @@ place them badly (docs/evaluation.md). The medians are printed three ways:
 Needs numpy (installed with evo by .ci/run).
 """
 import argparse
+import signal
 import sys
 
 import numpy as np
@@ -85,7 +86,7 @@ def steps(gt, est):
         length = np.linalg.norm(true_step)
         ratio = est_step @ true_step / length**2 if length > 0 else np.nan
         rows.append((length, np.linalg.norm(est_step), ratio, est_stamps[i1] - est_stamps[i0]))
-    return np.array(rows)
+    return np.array(rows).reshape(-1, 4)
 
 
 def window_speed(rows, k, period):
@@ -108,6 +109,7 @@ def table(title, key_m, rows):
 
 
 def main():
+    signal.signal(signal.SIGPIPE, signal.SIG_DFL)  # quiet when piped into `head`
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("groundtruth")
     ap.add_argument("trajectory")
