@@ -19,14 +19,7 @@ import sys
 
 import numpy as np
 
-
-def rotation(q):
-    x, y, z, w = np.asarray(q, dtype=float) / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
+from tum_poses import load, rotation
 
 
 def log_deg(r):
@@ -35,22 +28,6 @@ def log_deg(r):
         return np.zeros(3)
     axis = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]]) / (2 * np.sin(angle))
     return np.degrees(angle * axis)
-
-
-def load(path):
-    poses = []
-    with open(path) as f:
-        for number, line in enumerate(f, 1):
-            if line.startswith("#") or not line.strip():
-                continue
-            v = line.split()
-            if len(v) != 8:
-                sys.exit(f"{path}:{number}: expected 8 columns (stamp tx ty tz qx qy qz qw), got {len(v)}")
-            v = [float(x) for x in v]
-            poses.append((v[0], rotation(v[4:8])))
-    if not poses:
-        sys.exit(f"{path}: no poses")
-    return poses
 
 
 def nearest_rotation(m):
@@ -78,11 +55,12 @@ def main():
     ap.add_argument("--fit", action="store_true", help="fit a world rotation, then also a camera-side one")
     ap.add_argument("--rate", action="store_true", help="correlate the errors with the angular rate")
     a = ap.parse_args()
-    gt = load(a.groundtruth)
-    stamps = np.array([t for t, _ in gt])
+    stamps, gt_poses = load(a.groundtruth)
+    gt = [(t, p[:3, :3]) for t, p in zip(stamps, gt_poses)]
     pre = rotation(a.world_from_model[3:]) if a.world_from_model else np.eye(3)
     pairs, rates = [], []
-    for t, r in load(a.trajectory):
+    for t, p in zip(*load(a.trajectory)):
+        r = p[:3, :3]
         i = int(np.argmin(abs(stamps - t)))
         if abs(stamps[i] - t) < 0.02:
             pairs.append((gt[i][1], pre @ r))

@@ -29,44 +29,10 @@ import sys
 
 import numpy as np
 
+from tum_poses import load
+
 BINS_MM = [(0.0, 10.0), (10.0, 15.0), (15.0, 30.0), (30.0, float("inf"))]
 MAX_STAMP_GAP_S = 0.02
-
-
-def pose(v):
-    x, y, z, w = np.asarray(v[3:7], dtype=float) / np.linalg.norm(v[3:7])
-    m = np.eye(4)
-    m[:3, :3] = [
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ]
-    m[:3, 3] = v[0:3]
-    return m
-
-
-def load(path):
-    stamps, poses = [], []
-    try:
-        f = open(path)
-    except OSError as e:
-        sys.exit(f"{path}: cannot read: {e.strerror}")
-    with f:
-        for number, line in enumerate(f, 1):
-            if line.startswith("#") or not line.strip():
-                continue
-            v = line.split()
-            if len(v) != 8:
-                sys.exit(f"{path}:{number}: expected 8 columns (stamp tx ty tz qx qy qz qw), got {len(v)}")
-            try:
-                v = [float(x) for x in v]
-            except ValueError:
-                sys.exit(f"{path}:{number}: not a number in {line.strip()!r}")
-            stamps.append(v[0])
-            poses.append(pose(v[1:]))
-    if len(poses) < 2:
-        sys.exit(f"{path}: fewer than two poses")
-    return np.array(stamps), poses
 
 
 def steps(gt, est):
@@ -118,7 +84,11 @@ def main():
     a = ap.parse_args()
     if a.window < 1:
         sys.exit(f"--window {a.window}: give at least 1")
-    rows = steps(load(a.groundtruth), load(a.trajectory))
+    gt, est = load(a.groundtruth), load(a.trajectory)
+    for path, (stamps, _) in ((a.groundtruth, gt), (a.trajectory, est)):
+        if len(stamps) < 2:
+            sys.exit(f"{path}: fewer than two poses")
+    rows = steps(gt, est)
     period = np.median(rows[:, 3]) if len(rows) else 0.0
     kept = rows[rows[:, 3] <= a.max_interval]
     if len(kept) == 0:
