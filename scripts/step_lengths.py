@@ -90,10 +90,11 @@ def main():
             sys.exit(f"{path}: fewer than two poses")
     rows = steps(gt, est)
     period = np.median(rows[:, 3]) if len(rows) else 0.0
-    kept = rows[rows[:, 3] <= a.max_interval]
+    one_period = rows[:, 3] <= a.max_interval
+    kept = rows[one_period]
     if len(kept) == 0:
         sys.exit("no pair of consecutive estimates within --max-interval matches the ground truth")
-    speed = window_speed(rows, a.window, period)[rows[:, 3] <= a.max_interval]
+    speed = window_speed(rows, a.window, period)[one_period]
     print(f"{len(kept)} of {len(rows)} pairs at most {a.max_interval} s apart (period {period * 1000:.1f} ms)")
     print(f"estimated step projected on the true one, over its length: median {np.nanmedian(kept[:, 2]):.3f}")
     table("the pair's own true step (biased: see --help)", kept[:, 0], kept)
