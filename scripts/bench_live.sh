@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Live tracker benchmark: the camera driver, the tracker and the pose client as three
-# processes, the shipped 8-frame clip looped at 30 Hz for N frames (default 600).
+# processes, the shipped 8-frame clip played back and forth at 30 Hz (`--bounce`: a loop
+# would jump back to the first pose every 8 frames) for N frames (default 600).
 # Prints the tracker's time per frame and the latency from the driver's send to the
 # pose's arrival at the client (median, p99). PIN=false runs the tracker with its worker
 # threads unpinned (`pin_threads` in robot_config/tracker.toml).
@@ -27,7 +28,7 @@ $BIN poses --service "$TAG/poses" --quiet --count "$N" --timeout 30 > "$OUT/pose
 CLIENT=$!
 sleep 0.5
 $BIN camera --dataset tests/data/fr3_teddy_8 --camera robot_config/cameras/tum_fr3.toml \
-  --service "$TAG/camera" --loop --rate "${RATE:-30}" $QVGA 2>/dev/null &
+  --service "$TAG/camera" --bounce --rate "${RATE:-30}" $QVGA 2>/dev/null &
 wait $TRACKER
 wait $CLIENT || true
 echo "live tracker, $SIZE, $N frames at ${RATE:-30} Hz ($(nproc) cores, $(date -u +%F)):"

@@ -48,12 +48,25 @@ pub struct CameraJob {
     pub rate_hz: f64,
     /// Halve the images (publish QVGA).
     pub qvga: bool,
-    /// Start over after the last frame, until stopped.
-    pub repeat: bool,
+    /// What follows the last frame.
+    pub repeat: Repeat,
     /// Skip this many frames at the start.
     pub first_frame: usize,
     /// Stop after this many frames.
     pub max_frames: Option<u64>,
+}
+
+/// What the driver does after the last frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Repeat {
+    /// Stops.
+    Once,
+    /// Starts over at the first frame, until stopped.
+    Loop,
+    /// Plays the frames backwards to the first, then forwards again, until stopped
+    /// (datasets only): the motion never jumps, where a loop jumps back to the first
+    /// pose and a tracker's constant-velocity guess misses it twice.
+    Bounce,
 }
 
 /// What was published.
@@ -80,7 +93,16 @@ struct Recording {
 
 /// The frames to publish, one at a time.
 enum Source {
-    Dataset { loader: Box<FrameLoader>, frames: Vec<DatasetFrame>, cache: Vec<OwnedFrame>, index: usize },
+    Dataset {
+        loader: Box<FrameLoader>,
+        frames: Vec<DatasetFrame>,
+        cache: Vec<OwnedFrame>,
+        index: usize,
+        /// `Repeat::Bounce`: the frames run back and forth.
+        bounce: bool,
+        /// Bouncing, on the way back.
+        backwards: bool,
+    },
     Recording(Box<Recording>),
 }
 
@@ -113,7 +135,8 @@ fn open_dataset(job: &CameraJob, dataset: &Path, camera: &Path) -> Result<(Sourc
         }
     }
     let what = format!("{} frames of {}", frames.len(), dataset.display());
-    Ok((Source::Dataset { loader: Box::new(loader), frames, cache, index: 0 }, size, what))
+    let bounce = job.repeat == Repeat::Bounce;
+    Ok((Source::Dataset { loader: Box::new(loader), frames, cache, index: 0, bounce, backwards: false }, size, what))
 }
 
 fn open_recording(
@@ -174,10 +197,11 @@ impl Source {
     /// (skipped); `Err` when the input cannot go on.
     fn next(&mut self) -> Result<Option<Result<RgbdFrame<'_>, String>>> {
         match self {
-            Source::Dataset { loader, frames, cache, index } => {
-                let Some(entry) = frames.get(*index) else { return Ok(None) };
-                *index += 1;
-                if let Some(frame) = cache.get(*index - 1).and_then(OwnedFrame::view) {
+            Source::Dataset { loader, frames, cache, index, bounce, backwards } => {
+                let current = *index;
+                let Some(entry) = frames.get(current) else { return Ok(None) };
+                *index = if *bounce { bounce_next(current, frames.len(), backwards) } else { current + 1 };
+                if let Some(frame) = cache.get(current).and_then(OwnedFrame::view) {
                     return Ok(Some(Ok(frame)));
                 }
                 let stamp = format_stamp(entry.depth_stamp_ns);
@@ -191,6 +215,14 @@ impl Source {
                 }
                 Ok(Some(Ok(frame)))
             }
+        }
+    }
+
+    /// The number of frames, where it is known before they are read (a dataset).
+    fn frame_count(&self) -> Option<usize> {
+        match self {
+            Source::Dataset { frames, .. } => Some(frames.len()),
+            Source::Recording(_) => None,
         }
     }
 
@@ -212,7 +244,7 @@ impl Source {
 
     fn rewind(&mut self) -> Result<()> {
         match self {
-            Source::Dataset { index, .. } => *index = 0,
+            Source::Dataset { index, backwards, .. } => (*index, *backwards) = (0, false),
             Source::Recording(r) => {
                 r.reader = RecordingReader::open(&r.path, r.topics.clone(), r.camera)?;
                 r.skip_first()?;
@@ -220,6 +252,18 @@ impl Source {
         }
         Ok(())
     }
+}
+
+/// The frame after `current` of `len` frames played back and forth (0, 1, …, len − 1,
+/// len − 2, …, 0, 1, …): the ends are not repeated. `backwards` says which way it goes.
+fn bounce_next(current: usize, len: usize, backwards: &mut bool) -> usize {
+    if len < 2 {
+        return 0;
+    }
+    if *backwards && current == 0 || !*backwards && current + 1 == len {
+        *backwards = !*backwards;
+    }
+    if *backwards { current - 1 } else { current + 1 }
 }
 
 /// Publishes the frames until their end (or forever with `repeat`), a signal, or
@@ -230,6 +274,9 @@ pub fn run(job: &CameraJob) -> Result<CameraSummary> {
     }
     let (source, size, what) = match &job.input {
         CameraInput::Dataset { dataset, camera } => open_dataset(job, dataset, camera)?,
+        CameraInput::Mcap { .. } if job.repeat == Repeat::Bounce => {
+            bail!("--bounce plays a dataset's frames backwards, which a recording cannot be read; use --loop")
+        }
         CameraInput::Mcap { path, topics, camera } => open_recording(job, path, topics, camera.as_deref())?,
     };
     let node = ipc::node("mrsmap_camera")?;
@@ -255,7 +302,12 @@ fn publish<F: WireFrame>(
     let period = if job.rate_hz > 0.0 { Duration::from_secs_f64(1.0 / job.rate_hz) } else { Duration::ZERO };
     let mut summary = CameraSummary { sent: 0, unreadable: 0, signalled: false };
     let mut next = Instant::now();
-    log_line(format_args!("camera: publishing {what} on {name}{}", if job.repeat { ", repeating" } else { "" }));
+    let how = match job.repeat {
+        Repeat::Once => "",
+        Repeat::Loop => ", repeating",
+        Repeat::Bounce => ", back and forth",
+    };
+    log_line(format_args!("camera: publishing {what} on {name}{how}"));
     loop {
         if job.max_frames.is_some_and(|m| summary.sent >= m) {
             break;
@@ -271,9 +323,13 @@ fn publish<F: WireFrame>(
             Some(Err(e)) => {
                 log_line(format_args!("camera: skipping {e}"));
                 summary.unreadable += 1;
+                if summary.sent == 0 && source.frame_count().is_some_and(|n| summary.unreadable >= n as u64) {
+                    // Every frame was tried: going back (or round) would try them again.
+                    break;
+                }
                 continue;
             }
-            None if job.repeat && summary.sent > 0 => {
+            None if job.repeat != Repeat::Once && summary.sent > 0 => {
                 source.report_damage();
                 source.rewind()?;
                 continue;
@@ -294,4 +350,27 @@ fn publish<F: WireFrame>(
         summary.sent += 1;
     }
     Ok(summary)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::bounce_next;
+
+    /// The indices `bounce_next` visits from the first frame.
+    fn visits(len: usize, n: usize) -> Vec<usize> {
+        let (mut index, mut backwards) = (0, false);
+        let mut out = vec![index];
+        for _ in 1..n {
+            index = bounce_next(index, len, &mut backwards);
+            out.push(index);
+        }
+        out
+    }
+
+    #[test]
+    fn bounce_runs_back_and_forth_without_repeating_the_ends() {
+        assert_eq!(visits(4, 11), [0, 1, 2, 3, 2, 1, 0, 1, 2, 3, 2]);
+        assert_eq!(visits(2, 5), [0, 1, 0, 1, 0]);
+        assert_eq!(visits(1, 3), [0, 0, 0]);
+    }
 }

@@ -100,6 +100,11 @@ pub struct CameraArgs {
     /// Start over after the last frame, until stopped.
     #[arg(long = "loop")]
     pub repeat: bool,
+    /// Play the frames to the last, back to the first, and so on, until stopped: the
+    /// motion never jumps (a loop jumps back to the first pose, which costs a tracker
+    /// two long registrations per loop). Datasets only.
+    #[arg(long, conflicts_with_all = ["repeat", "mcap"])]
+    pub bounce: bool,
     /// Skip this many frames at the start.
     #[arg(long, default_value_t = 0)]
     pub first_frame: usize,

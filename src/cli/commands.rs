@@ -222,7 +222,11 @@ pub fn camera(a: CameraArgs) -> Result<()> {
         service: a.service,
         rate_hz: a.rate,
         qvga: a.qvga,
-        repeat: a.repeat,
+        repeat: match (a.repeat, a.bounce) {
+            (_, true) => app::camera_driver::Repeat::Bounce,
+            (true, false) => app::camera_driver::Repeat::Loop,
+            (false, false) => app::camera_driver::Repeat::Once,
+        },
         first_frame: a.first_frame,
         max_frames: a.max_frames,
     };
@@ -233,6 +237,9 @@ pub fn camera(a: CameraArgs) -> Result<()> {
         s.unreadable,
         if s.signalled { ", stopped by signal" } else { "" }
     );
+    if s.sent == 0 && s.unreadable > 0 {
+        anyhow::bail!("no frame could be read ({} tried; the reasons are above)", s.unreadable);
+    }
     Ok(())
 }
 
