@@ -275,7 +275,7 @@ pub fn run(job: &CameraJob) -> Result<CameraSummary> {
     let (source, size, what) = match &job.input {
         CameraInput::Dataset { dataset, camera } => open_dataset(job, dataset, camera)?,
         CameraInput::Mcap { .. } if job.repeat == Repeat::Bounce => {
-            bail!("--bounce plays a dataset's frames backwards, which a recording cannot be read; use --loop")
+            bail!("--bounce plays a dataset's frames backwards, and a recording is read forwards only: use --loop")
         }
         CameraInput::Mcap { path, topics, camera } => open_recording(job, path, topics, camera.as_deref())?,
     };
