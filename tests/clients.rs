@@ -10,26 +10,36 @@ use mrsmap::io::tracker_config::read_tracker_config;
 use mrsmap::io::tum::TumDataset;
 use std::process::Command;
 
-#[test]
-fn the_pose_client_prints_json_lines_a_program_can_read() {
-    let dir = temp_dir("poses-json");
-    let config_path = write_tracker_config(&dir, "posesjson", "");
+/// Runs a tracker, a pose client printing `count` poses as JSON lines, and a driver
+/// publishing the shipped clip at 10 Hz with `driver_args`; checks that each process
+/// ends cleanly and returns the poses, one JSON object per stdout line.
+fn json_poses_of_the_clip(tag: &str, count: usize, driver_args: &[&str]) -> Vec<serde_json::Value> {
+    let dir = temp_dir(tag);
+    let config_path = write_tracker_config(&dir, tag, "");
     let config = read_tracker_config(&config_path).expect("config");
     let (tracker, tracker_err) = start(&["track", "--config", path_str(&config_path)]);
     wait_for(&tracker_err, "ready", 60);
+    let count = count.to_string();
     let (client, client_err) =
-        start(&["poses", "--service", &config.poses_service, "--json", "--count", "8", "--timeout", "30"]);
+        start(&["poses", "--service", &config.poses_service, "--json", "--count", &count, "--timeout", "30"]);
     wait_for(&client_err, "reading", 30);
     let (clip, camera_file) = (teddy_clip(), fr3_camera_file());
     let camera = ["camera", "--dataset", path_str(&clip), "--camera", path_str(&camera_file)];
-    let (driver, _) = start(&[&camera[..], &["--service", &config.camera_service, "--rate", "10"]].concat());
+    let service = ["--service", &config.camera_service, "--rate", "10"];
+    let (driver, _) = start(&[&camera[..], &service, driver_args].concat());
     assert_eq!(finish(driver, 60).0, Some(0));
     let (code, out) = finish(client, 60);
     assert_eq!(code, Some(0), "{out}");
+    signal(&tracker.0, "INT");
+    assert_eq!(finish(tracker, 30).0, Some(0));
     // Only the poses on stdout (the summary went to stderr): one JSON object a line.
-    let poses: Vec<serde_json::Value> =
-        out.lines().map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("{e}: {l}"))).collect();
-    assert_eq!(poses.len(), 8, "{out}");
+    out.lines().map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("{e}: {l}"))).collect()
+}
+
+#[test]
+fn the_pose_client_prints_json_lines_a_program_can_read() {
+    let poses = json_poses_of_the_clip("posesjson", 8, &[]);
+    assert_eq!(poses.len(), 8, "{poses:?}");
     let sequences: Vec<u64> = poses.iter().map(|p| p["frame_sequence"].as_u64().expect("sequence")).collect();
     assert!(sequences.windows(2).all(|w| w[0] < w[1]), "{sequences:?}");
     for p in &poses {
@@ -40,37 +50,18 @@ fn the_pose_client_prints_json_lines_a_program_can_read() {
         assert!((0.9..1.2).contains(&z), "the teddy is about a metre in front of the camera: {p}");
         assert!(p["latency_ms"].as_f64().is_some_and(|l| l >= 0.0));
     }
-    signal(&tracker.0, "INT");
-    assert_eq!(finish(tracker, 30).0, Some(0));
 }
 
 #[test]
 fn a_bouncing_driver_plays_the_clip_back_and_forth_and_the_teddy_stays_tracked() {
-    let dir = temp_dir("bounce");
-    let config_path = write_tracker_config(&dir, "bounce", "");
-    let config = read_tracker_config(&config_path).expect("config");
-    let (tracker, tracker_err) = start(&["track", "--config", path_str(&config_path)]);
-    wait_for(&tracker_err, "ready", 60);
-    let (client, client_err) =
-        start(&["poses", "--service", &config.poses_service, "--json", "--count", "12", "--timeout", "30"]);
-    wait_for(&client_err, "reading", 30);
-    let (clip, camera_file) = (teddy_clip(), fr3_camera_file());
-    let camera = ["camera", "--dataset", path_str(&clip), "--camera", path_str(&camera_file), "--bounce"];
-    let (driver, _) =
-        start(&[&camera[..], &["--service", &config.camera_service, "--rate", "10", "--max-frames", "12"]].concat());
-    assert_eq!(finish(driver, 60).0, Some(0));
-    let (code, out) = finish(client, 60);
-    assert_eq!(code, Some(0), "{out}");
-    let poses: Vec<serde_json::Value> =
-        out.lines().map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("{e}: {l}"))).collect();
+    let poses = json_poses_of_the_clip("bounce", 12, &["--bounce", "--max-frames", "12"]);
     // The clip's 8 frames forwards, then back from the seventh: no frame twice in a row.
-    let stamps: Vec<u64> = TumDataset::open(&clip).expect("clip").frames.iter().map(|f| f.depth_stamp_ns).collect();
+    let stamps: Vec<u64> =
+        TumDataset::open(&teddy_clip()).expect("clip").frames.iter().map(|f| f.depth_stamp_ns).collect();
     let expected: Vec<u64> = [0, 1, 2, 3, 4, 5, 6, 7, 6, 5, 4, 3].iter().map(|&i| stamps[i]).collect();
     let sent: Vec<u64> = poses.iter().map(|p| p["frame_stamp_ns"].as_u64().expect("stamp")).collect();
-    assert_eq!(sent, expected, "{out}");
-    assert!(poses.iter().all(|p| p["status"] == "tracking"), "{out}");
-    signal(&tracker.0, "INT");
-    assert_eq!(finish(tracker, 30).0, Some(0));
+    assert_eq!(sent, expected, "{poses:?}");
+    assert!(poses.iter().all(|p| p["status"] == "tracking"), "{poses:?}");
 }
 
 #[test]
