@@ -5,8 +5,9 @@
 # Prints the tracker's time per frame and the latency from the driver's send to the
 # pose's arrival at the client (median, p99). PIN=false runs the tracker with its worker
 # threads unpinned (`pin_threads` in robot_config/tracker.toml). DATASET=DIR plays another
-# TUM folder, and OBJECTS=FILE (a file of [[object]] tables, model paths absolute) tracks
-# its objects instead of the teddy: e.g. the rendered cow of scripts/synthetic_objects.sh
+# TUM folder (CAMERA=FILE: its camera file, default robot_config/cameras/tum_fr3.toml),
+# and OBJECTS=FILE (a file of [[object]] tables, model paths absolute) tracks its objects
+# instead of the teddy: e.g. the rendered cow of scripts/synthetic_objects.sh
 # (docs/benchmarks.md, "Live: camera driver → tracker → client", stop 74).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -31,6 +32,8 @@ if [ -n "${OBJECTS:-}" ]; then
 fi
 DATASET=${DATASET:-tests/data/fr3_teddy_8}
 [ -d "$DATASET" ] || { echo "bench_live: DATASET=$DATASET: no such folder" >&2; exit 2; }
+CAMERA=${CAMERA:-robot_config/cameras/tum_fr3.toml}
+[ -f "$CAMERA" ] || { echo "bench_live: CAMERA=$CAMERA: no such file" >&2; exit 2; }
 QVGA=""; [ "$SIZE" = qvga ] && QVGA="--qvga"
 $BIN track --config "$OUT/tracker.toml" --max-frames "$N" > "$OUT/tracker.txt" 2> "$OUT/tracker.err" &
 TRACKER=$!
@@ -41,7 +44,7 @@ done
 $BIN poses --service "$TAG/poses" --quiet --count "$N" --timeout 30 > "$OUT/poses.txt" 2>/dev/null &
 CLIENT=$!
 sleep 0.5
-$BIN camera --dataset "$DATASET" --camera robot_config/cameras/tum_fr3.toml \
+$BIN camera --dataset "$DATASET" --camera "$CAMERA" \
   --service "$TAG/camera" --bounce --rate "${RATE:-30}" $QVGA 2>/dev/null &
 wait $TRACKER
 wait $CLIENT || true
