@@ -1,5 +1,5 @@
 //! How long after a serial stretch does the second worker of a rayon pool start on
-//! parallel work? (docs/benchmarks.md, stop 31.)
+//! parallel work? (docs/benchmarks-history.md, stop 31.)
 //!
 //! Within a frame, map building alternates parallel regions with serial ones (the sort
 //! of the aggregates and the creation of the tree: ~0.4 ms per VGA frame). A rayon

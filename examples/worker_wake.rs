@@ -1,4 +1,4 @@
-//! Does a second core join parallel work after the process idled? (docs/benchmarks.md,
+//! Does a second core join parallel work after the process idled? (docs/benchmarks-history.md,
 //! "The live tracker after an idle gap".)
 //!
 //! A rayon pool of two runs "frames" shaped like a tracker step: 20 parallel regions,

@@ -8,7 +8,7 @@
 # TUM folder (CAMERA=FILE: its camera file, default robot_config/cameras/tum_fr3.toml),
 # and OBJECTS=FILE (a file of [[object]] tables, model paths absolute) tracks its objects
 # instead of the teddy: e.g. the rendered cow of scripts/synthetic_objects.sh
-# (docs/benchmarks.md, "Live: camera driver → tracker → client", stop 74).
+# (docs/benchmarks-history.md, "Live: camera driver → tracker → client", stop 74).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 N=${1:-600}

@@ -5,7 +5,7 @@
 //! with the first one (on a virtual machine it does so when the idle virtual CPU has been
 //! descheduled by its host; `available_idle_cpu` then reads it as taken), and there the
 //! two share one core until the load balancer moves one of them, which takes longer than
-//! a frame. Measured on the Intel VM (`examples/worker_wake.rs`, docs/benchmarks.md, stop
+//! a frame. Measured on the Intel VM (`examples/worker_wake.rs`, docs/benchmarks-history.md, stop
 //! 54): after a 33 ms idle gap the second worker took 10 % of the parallel regions
 //! unpinned and 100 % pinned. A worker pinned to a CPU of its own cannot be placed
 //! anywhere else: its wake-up waits for its own CPU instead.

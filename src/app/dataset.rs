@@ -38,7 +38,7 @@ pub fn initial_pose(dataset: &TumDataset, stamp_ns: u64, notes: &mut String) -> 
 /// jobs `work` shares out as soon as they appear, instead of falling asleep between
 /// them and being woken for the next (tens of microseconds each on a virtual machine).
 /// For frames processed back to back with nothing else running (offline tracking,
-/// odometry and mapping over a dataset): there it made the step 2–5 % faster (`docs/benchmarks.md`,
+/// odometry and mapping over a dataset): there it made the step 2–5 % faster (`docs/benchmarks-history.md`,
 /// "Two cores, one job per piece"). Not for the live tracker: after the camera's idle
 /// gap between frames a spinning worker slowed the step by half instead (the host seems
 /// to give both virtual cores one physical core then). The replay runs it beside the

@@ -30,7 +30,7 @@ use std::path::Path;
 /// crate's default. A VGA frame (camera info, colour, then depth: 1.5 MB with 16UC1 depth)
 /// then closes its chunk with its depth image, so each chunk holds one whole frame. A
 /// reader decompresses a whole chunk at a time, and chunks of one frame spread decoding
-/// evenly over the frames (the replay reads beside the tracker step: docs/benchmarks.md,
+/// evenly over the frames (the replay reads beside the tracker step: docs/benchmarks-history.md,
 /// "MCAP replay", stop 48). `ros2 bag record -s mcap` writes 768 KiB chunks by default
 /// (a frame's colour and depth then fall in different chunks), its `zstd_small` preset
 /// 4 MiB.

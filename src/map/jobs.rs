@@ -7,7 +7,7 @@
 //! parts of equal item counts, not of equal costs: the bands of rows around an object
 //! cost far more than those above it, and so do the chunks of surfels on it. The
 //! thread that finishes its parts first then waits for the other. With one job per item
-//! it takes over the rest item by item. On the 2-core machine of `docs/benchmarks.md`
+//! it takes over the rest item by item. On the 2-core machine of `docs/benchmarks-history.md`
 //! (stop 46) this made the tracker's step 3–5 % faster at VGA and QVGA, and odometry
 //! up to 8 % at QVGA (frames paired within one run); the extra joins cost 0.4 % of the
 //! instructions.

@@ -69,7 +69,7 @@ pub struct MapParams {
     /// its cross-covariance with position. Maps that are saved or fused (key views,
     /// models) need them. Registration does not read them (it uses the position
     /// covariance and the mean colour), so odometry and the tracker's scene maps turn
-    /// this off: each pixel then adds to 13 sums instead of 28 (docs/benchmarks.md, stop
+    /// this off: each pixel then adds to 13 sums instead of 28 (docs/benchmarks-history.md, stop
     /// 40), and [`SurfelMap::stats`](super::SurfelMap::stats) holds zero colour rows.
     pub color_scatter: bool,
 }

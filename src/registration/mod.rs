@@ -249,7 +249,7 @@ impl Solver<'_> {
     /// LM then stops halfway along that step, between the two regions. (Such a cycle used
     /// to run to `lm_max_iterations`; on fr3_teddy frames 100–199 it stops 3 of 93 VGA
     /// tracking registrations early and 7 of the quality evaluation's 558 perturbed ones:
-    /// docs/benchmarks.md, stop 32.)
+    /// docs/benchmarks-history.md, stop 32.)
     ///
     /// The gain ratio needs the cost of the current associations at the candidate pose;
     /// it is summed in the same sweep that re-associates at the candidate. A rejected
@@ -468,7 +468,7 @@ impl Solver<'_> {
 /// rejected sweeps, each a full re-association. Measured on fr3_teddy tracking (frames
 /// 100–199): 10 % fewer LM sweeps, ATE median / max 7.3 / 16.5 → 6.8 / 14.9 mm, 78
 /// instead of 82 of 558 perturbed starts failing; odometry and SLAM unchanged within
-/// 0.05 mm (docs/benchmarks.md).
+/// 0.05 mm (docs/benchmarks-history.md).
 const REJECTION_GROWTH: f64 = 10.0;
 
 /// The standard deviation along the worst direction of the translation (`offset` 0, m)

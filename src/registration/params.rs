@@ -57,7 +57,7 @@ pub struct RegistrationParams {
     /// A small step counts as convergence only after one more pass that searches every
     /// association afresh instead of around the previous match (the original's rule).
     /// Without it registration takes ~20 % fewer instructions and its results are
-    /// slightly worse (docs/benchmarks.md, stop 27): a tracker, which searches afresh at
+    /// slightly worse (docs/benchmarks-history.md, stop 27): a tracker, which searches afresh at
     /// every frame anyway, may choose that.
     pub confirm_with_fresh_associations: bool,
     /// Before a small step's re-association, which searches every match afresh at the
@@ -67,7 +67,7 @@ pub struct RegistrationParams {
     /// measured gives the same results bit for bit (`tests/real_frames.rs`). It saves the
     /// search where the step is rejected and costs the sum where it is accepted:
     /// registration −3.5 % instructions in VGA tracking, −4.4 % QVGA, but +1.3 % in VGA
-    /// odometry (docs/benchmarks.md, stop 32). On for the tracker. (A step right after a
+    /// odometry (docs/benchmarks-history.md, stop 32). On for the tracker. (A step right after a
     /// rejected one is always tested first: most of those are rejected again.)
     pub test_small_steps_first: bool,
     /// Interpolate model surfels trilinearly in the Newton stage (§4.3).

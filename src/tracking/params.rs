@@ -135,7 +135,7 @@ impl Default for TrackerParams {
                 lm_max_iterations: 10,
                 newton_iterations: 2,
                 // Converged below 2 mm / 2 mrad steps (odometry: 0.5): at the tracker's
-                // accuracy (~7 mm) this saves 18 % of registration work (docs/benchmarks.md).
+                // accuracy (~7 mm) this saves 18 % of registration work (docs/benchmarks-history.md).
                 step_tolerance_m: 2e-3,
                 step_tolerance_rad: 2e-3,
                 // The tracker's small steps are often rejected: test them before the
