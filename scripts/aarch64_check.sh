@@ -13,9 +13,9 @@
 # the robot's CPU").
 #
 # Installs what it lacks where it can: the Rust target (rustup) and, as root on Debian,
-# gcc-aarch64-linux-gnu, libc6-dev-arm64-cross and qemu-user. Where the Rust target cannot
-# be installed it says so and exits 0 with MRSMAP_AARCH64_OPTIONAL=1 (else 1). Takes about
-# 6 minutes on 2 cores (the cross build 4, the emulated runs 2).
+# gcc-aarch64-linux-gnu, libc6-dev-arm64-cross and qemu-user. Where these cannot be
+# installed it says so and exits 0 with MRSMAP_AARCH64_OPTIONAL=1 (else 1); a difference
+# always fails. Takes about 6 minutes on 2 cores (the cross build 4, the emulated runs 2).
 #   scripts/aarch64_check.sh            # data in ../shared/data/tum (MRSMAP_TUM=DIR to change)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -100,10 +100,11 @@ if [ ! -e $binfmt/qemu-aarch64 ] && [ "$(id -u)" = 0 ] && [ -f /usr/lib/binfmt.d
     [ -e $binfmt/register ] && cat /usr/lib/binfmt.d/qemu-aarch64.conf > $binfmt/register 2> /dev/null || true
 fi
 if [ -e $binfmt/qemu-aarch64 ] && grep -q enabled $binfmt/qemu-aarch64; then
-    # 2 frames a second: the emulated tracker (~80 ms a frame) takes every frame.
+    # One frame a second: the emulated tracker (80-100 ms a frame, the first up to ~300 ms
+    # on a busy machine) takes every frame, and a skipped one would change the poses.
     for arch in x86 arm; do
         bin=$X86; [ $arch = arm ] && bin=$ARM
-        "$bin" demo --rate 2 > "$OUT/demo_$arch.log" 2>&1 \
+        "$bin" demo --rate 1 > "$OUT/demo_$arch.log" 2>&1 \
             || { cat "$OUT/demo_$arch.log"; echo "aarch64_check: the demo failed on $arch" >&2; exit 1; }
         # The poses (stamp, status, position, quality, free space, error), not the times.
         grep -E '^[0-9]{10}\.' "$OUT/demo_$arch.log" | awk '{print $1, $2, $3, $4, $5, $6, $7, $9}' > "$OUT/demo_$arch.txt"
