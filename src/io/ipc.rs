@@ -214,26 +214,25 @@ pub fn node(name: &str) -> Result<Node<Ipc>, IpcError> {
         .map_err(|e| {
             let mut error = IpcError::new(format!("creating node {name}"), e);
             let global = &Config::global_config().global;
-            let folders =
-                [global.root_path().to_string(), global.node_dir().to_string(), global.service_dir().to_string()];
-            if let Some(why) = folders.iter().find_map(|f| runtime_folder_problem(std::path::Path::new(f))) {
+            let root = global.root_path().to_string();
+            let folders = [root.clone(), global.node_dir().to_string(), global.service_dir().to_string()];
+            if let Some(why) = folders.iter().find_map(|f| runtime_folder_problem(std::path::Path::new(f), &root)) {
                 error.message = format!("{} ({why})", error.message);
             }
             error
         })
 }
 
-/// Why this process cannot use iceoryx2's runtime folder `folder`, if it cannot.
-/// iceoryx2 0.10 creates its folders for their creator's user and group alone, and a
-/// process of another user then fails to create a node with nothing but `InternalError`:
-/// after a camera driver run as root once, or with the driver and the tracker run as two
-/// users.
-fn runtime_folder_problem(folder: &std::path::Path) -> Option<String> {
+/// Why this process cannot use `folder`, one of iceoryx2's runtime folders under `root`,
+/// if it cannot. iceoryx2 0.10 creates its folders for their creator's user and group
+/// alone, and a process of another user then fails to create a node with nothing but
+/// `InternalError`: after a camera driver run as root once, or with the driver and the
+/// tracker run as two users.
+fn runtime_folder_problem(folder: &std::path::Path, root: &str) -> Option<String> {
     use std::os::unix::fs::MetadataExt;
     let denied = std::fs::read_dir(folder).err()?.kind() == std::io::ErrorKind::PermissionDenied;
     let meta = std::fs::metadata(folder).ok().filter(|_| denied)?;
     let this_user = std::fs::metadata("/proc/self").map(|m| m.uid().to_string()).unwrap_or_else(|_| "?".into());
-    let root = Config::global_config().global.root_path().to_string();
     Some(format!(
         "iceoryx2's folder {} belongs to user {} (mode {:o}), and this process's user {this_user} cannot use it: \
          run the camera driver, the tracker and its clients as one user; what another user left (a run as \
