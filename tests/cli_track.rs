@@ -11,13 +11,63 @@ use std::process::Command;
 #[test]
 fn the_readme_demo_runs_two_processes_and_tracks_every_frame() {
     let out = Command::new(env!("CARGO_BIN_EXE_mrsmap"))
-        .args(["demo", "--rate", "20"])
+        .args(["demo", "--rate", &camera_hz(20)])
         .current_dir(root())
         .output()
         .expect("demo runs");
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success(), "{text}\n{}", String::from_utf8_lossy(&out.stderr));
     assert!(text.contains("8 poses received, 8 tracking") && text.contains("error vs motion capture"), "{text}");
+}
+
+#[test]
+fn the_demo_ends_promptly_and_explains_the_frames_a_slower_tracker_dropped() {
+    // A frame every millisecond: faster than the tracker, as a slow robot computer is
+    // against a 30 Hz camera. It drops the frames a newer one replaced; the demo must not
+    // wait for them (it waited a minute before) and must say why they have no pose.
+    let started = std::time::Instant::now();
+    let out = Command::new(env!("CARGO_BIN_EXE_mrsmap"))
+        .args(["demo", "--rate", "1000"])
+        .current_dir(root())
+        .output()
+        .expect("demo runs");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}\n{}", String::from_utf8_lossy(&out.stderr));
+    assert!(started.elapsed() < std::time::Duration::from_secs(20), "the demo waited for dropped frames: {text}");
+    let received: usize = text
+        .split("demo: ")
+        .nth(2)
+        .and_then(|s| s.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("the demo counts the poses: {text}"));
+    assert!(received <= 8, "{text}");
+    let explained = format!("demo: {} of 8 frames got no pose.", 8 - received);
+    assert_eq!(text.contains(&explained), received < 8, "{text}");
+    if received < 8 {
+        assert!(text.contains("` sends them slowly enough to see every frame"), "{text}");
+        assert!(text.contains("dropped as stale), stopped by signal"), "the tracker stops cleanly: {text}");
+    }
+}
+
+#[test]
+fn the_demo_reports_a_failed_camera_driver_and_a_bad_rate() {
+    // The driver cannot read its camera file: the demo stops with the driver's reason (it
+    // used to wait a minute for poses and report none).
+    let dir = temp_dir("demo_bad_camera");
+    let camera = dir.join("camera.toml");
+    std::fs::write(&camera, "fx = \"not a number\"\n").expect("write");
+    let started = std::time::Instant::now();
+    let out = mrsmap(&["demo", "--camera", path_str(&camera), "--rate", "30"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("the camera driver failed") && err.contains("camera.toml"), "{err}");
+    assert!(started.elapsed() < std::time::Duration::from_secs(30), "{err}");
+    for rate in ["-1", "nan", "inf"] {
+        let out = mrsmap(&["demo", &format!("--rate={rate}")]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{err}");
+        assert!(err.contains("give frames per second"), "{err}");
+    }
 }
 
 #[test]

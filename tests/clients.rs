@@ -11,8 +11,8 @@ use mrsmap::io::tum::TumDataset;
 use std::process::Command;
 
 /// Runs a tracker, a pose client printing `count` poses as JSON lines, and a driver
-/// publishing the shipped clip at 10 Hz with `driver_args`; checks that each process
-/// ends cleanly and returns the poses, one JSON object per stdout line.
+/// publishing the shipped clip at 10 Hz ([`camera_hz`]) with `driver_args`; checks that
+/// each process ends cleanly and returns the poses, one JSON object per stdout line.
 fn json_poses_of_the_clip(tag: &str, count: usize, driver_args: &[&str]) -> Vec<serde_json::Value> {
     let dir = temp_dir(tag);
     let config_path = write_tracker_config(&dir, tag, "");
@@ -25,7 +25,8 @@ fn json_poses_of_the_clip(tag: &str, count: usize, driver_args: &[&str]) -> Vec<
     wait_for(&client_err, "reading", 30);
     let (clip, camera_file) = (teddy_clip(), fr3_camera_file());
     let camera = ["camera", "--dataset", path_str(&clip), "--camera", path_str(&camera_file)];
-    let service = ["--service", &config.camera_service, "--rate", "10"];
+    let rate = camera_hz(10);
+    let service = ["--service", &config.camera_service, "--rate", &rate];
     let (driver, _) = start(&[&camera[..], &service, driver_args].concat());
     assert_eq!(finish(driver, 60).0, Some(0));
     let (code, out) = finish(client, 60);

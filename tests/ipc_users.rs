@@ -17,12 +17,14 @@ use std::process::Command;
 fn a_process_of_another_user_is_told_whose_iceoryx2_folder_it_cannot_use() {
     // Root makes the folders (a pose client that finds no tracker), then `nobody` tries
     // the same. The binary is copied into the private /tmp: the build folder may not be
-    // readable by `nobody`.
+    // readable by `nobody`, and may itself lie under the /tmp that the mount hides (it is
+    // opened first for that).
     let script = r#"
         set -u
+        exec 3< "$1" || { echo "SETUP: cannot read $1"; exit 1; }
         mount --make-rprivate / && mount -t tmpfs -o mode=1777 none /tmp && mount -t tmpfs -o mode=1777 none /dev/shm \
             || { echo "SETUP: no private mounts"; exit 0; }
-        cp "$1" /tmp/mrsmap && chmod 755 /tmp/mrsmap
+        cat <&3 > /tmp/mrsmap && chmod 755 /tmp/mrsmap
         /tmp/mrsmap poses --service users_test/poses --timeout 1 > /dev/null 2>&1
         echo "root: $?"
         setpriv --reuid=65534 --regid=65534 --clear-groups /tmp/mrsmap poses --service users_test/poses --timeout 1

@@ -53,7 +53,7 @@ fn driver_tracker_and_client_as_processes() {
         "30",
     ]);
     wait_for(&client_err, "reading", 30);
-    let camera = start_clip_driver(&config.camera_service, &["--rate", "10"]);
+    let camera = start_clip_driver(&config.camera_service, &["--rate", &camera_hz(10)]);
     assert_eq!(finish(camera, 60).0, Some(0), "the driver sends 8 frames and exits");
     let (code, out) = finish(client, 60);
     assert_eq!(code, Some(0), "client: {out}");
@@ -378,8 +378,9 @@ fn camera_replays_mcap_and_the_tracker_records_what_it_receives() {
     wait_for(&tracker_err, "ready", 60);
     let (client, client_err) = start(&["poses", "--service", &config.poses_service, "--count", "8", "--timeout", "30"]);
     wait_for(&client_err, "reading", 30);
+    let rate = camera_hz(10);
     let (camera, _) =
-        start(&["camera", "--mcap", path_str(&recording), "--service", &config.camera_service, "--rate", "10"]);
+        start(&["camera", "--mcap", path_str(&recording), "--service", &config.camera_service, "--rate", &rate]);
     assert_eq!(finish(camera, 60).0, Some(0), "the driver sends the 8 frames of the recording and exits");
     let (code, out) = finish(client, 60);
     assert_eq!(code, Some(0), "client: {out}");

@@ -11,6 +11,7 @@ use crate::io::tum::{TumDataset, format_stamp};
 use crate::io::wire::ObjectPose;
 use crate::model::load;
 use anyhow::{Context, Result, bail};
+use rustix::process::{Pid, Signal, kill_process};
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -54,6 +55,9 @@ fn check_paths(job: &DemoJob) -> Result<()> {
 
 /// Runs the demo; prints as it goes.
 pub fn run(job: &DemoJob) -> Result<()> {
+    if !(job.rate_hz.is_finite() && job.rate_hz >= 0.0) {
+        bail!("--rate {}: give frames per second, a number >= 0 (0: as fast as the driver can)", job.rate_hz);
+    }
     check_paths(job)?;
     let config = read_tracker_config(&job.config)?;
     let dataset = TumDataset::open(&job.dataset).with_context(|| format!("opening {}", job.dataset.display()))?;
@@ -96,22 +100,15 @@ pub fn run(job: &DemoJob) -> Result<()> {
     let events = ipc::events(&node, &poses_service)?;
     let listener = events.listener_builder().create().map_err(|e| ipc::IpcError::new("pose listener", e))?;
     let entry = reader.entry::<ObjectPose>(&0).map_err(|e| ipc::IpcError::new("pose entry", e))?;
-    let mut camera = Guard(
-        Command::new(&exe)
-            .arg("camera")
-            .arg("--dataset")
-            .arg(&job.dataset)
-            .arg("--camera")
-            .arg(&job.camera)
-            .args(["--service", &camera_service, "--rate", &job.rate_hz.to_string()])
-            .stderr(Stdio::null())
-            .spawn()
-            .context("starting the camera driver process")?,
-    );
+    let (mut camera, driver_messages) = start_driver(&exe, job, &camera_service)?;
     let world_from_model = load(&config.objects[0].model)?.world_from_model();
+    let last_stamp_ns = dataset.frames.last().map(|f| f.depth_stamp_ns);
     let mut seen = 0;
     let mut received: Vec<(ObjectPose, u64)> = Vec::new();
     let deadline = Instant::now() + Duration::from_secs(60);
+    // When the driver has sent its last frame; when the last pose arrived; whether it
+    // answered the last frame.
+    let (mut driver_done, mut last_pose_at, mut answered_last) = (None::<Instant>, Instant::now(), false);
     println!(
         "{:<18} {:<13} {:>30} {:>9} {:>10} {:>10} {:>10}",
         "stamp", "status", "camera_from_object t (m)", "quality", "free space", "track ms", "error mm"
@@ -123,38 +120,130 @@ pub fn run(job: &DemoJob) -> Result<()> {
         if p.publish_stamp_ns != seen && p.frame_send_stamp_ns != 0 {
             seen = p.publish_stamp_ns;
             let arrived = now_ns();
-            let error = ground_truth_error(&dataset, &world_from_model, &p);
-            let t = p.translation_m;
-            println!(
-                "{:<18} {:<13} [{:+.3}, {:+.3}, {:+.3}] {:>9.2} {:>10.3} {:>10.2} {:>10}",
-                format_stamp(p.frame_stamp_ns),
-                status_label(&p),
-                t[0],
-                t[1],
-                t[2],
-                p.quality,
-                p.free_space,
-                p.build_ms + p.register_ms,
-                error.map_or("-".into(), |e| format!("{:.1}", e * 1e3))
-            );
+            (last_pose_at, answered_last) = (Instant::now(), Some(p.frame_stamp_ns) == last_stamp_ns);
+            print_pose(&dataset, &world_from_model, &p);
             received.push((p, arrived));
+        }
+        if driver_done.is_none() && camera.0.try_wait()?.is_some() {
+            driver_done = Some(Instant::now());
+        }
+        if driver_done.is_some_and(|done| answered_last || all_quiet(done, last_pose_at)) {
+            // The driver is done (every frame sent, or failed) and the tracker has
+            // answered the last frame or stayed silent: frames it dropped get no pose.
+            break;
         }
         if node.wait(Duration::ZERO).is_err() {
             break;
         }
     }
-    let _ = camera.0.wait();
-    let tracker_out = {
-        let _ = tracker.0.wait();
-        let mut s = String::new();
-        if let Some(mut out) = tracker.0.stdout.take() {
-            let _ = std::io::Read::read_to_string(&mut out, &mut s);
-        }
-        s
-    };
+    let driver_status = camera.0.wait()?;
+    let tracker_out = stop_tracker(&mut tracker, received.len() < frames)?;
     print!("{tracker_out}");
+    if !driver_status.success() {
+        let messages = driver_messages.and_then(|m| m.join().ok()).unwrap_or_default();
+        bail!("the camera driver failed ({driver_status}): {}", messages.trim());
+    }
     summarize(&dataset, &world_from_model, &received);
+    explain_dropped(frames, job.rate_hz, &received);
     Ok(())
+}
+
+/// Starts the camera driver on `camera_service`, and a thread that collects its messages
+/// (shown only if it fails; read as they come, since a full pipe would stop it).
+fn start_driver(
+    exe: &std::path::Path,
+    job: &DemoJob,
+    camera_service: &str,
+) -> Result<(Guard, Option<std::thread::JoinHandle<String>>)> {
+    let mut camera = Guard(
+        Command::new(exe)
+            .arg("camera")
+            .arg("--dataset")
+            .arg(&job.dataset)
+            .arg("--camera")
+            .arg(&job.camera)
+            .args(["--service", camera_service, "--rate", &job.rate_hz.to_string()])
+            .stderr(Stdio::piped())
+            .spawn()
+            .context("starting the camera driver process")?,
+    );
+    let messages = camera.0.stderr.take().map(|mut e| {
+        std::thread::spawn(move || {
+            let mut text = String::new();
+            let _ = std::io::Read::read_to_string(&mut e, &mut text);
+            text
+        })
+    });
+    Ok((camera, messages))
+}
+
+/// Waits for the tracker to end and returns what it printed. With `frames_missing` it
+/// still waits for frames that it dropped: it is stopped cleanly (SIGINT), and prints its
+/// summary; otherwise it stops by itself at its frame limit.
+fn stop_tracker(tracker: &mut Guard, frames_missing: bool) -> Result<String> {
+    if frames_missing && tracker.0.try_wait()?.is_none() {
+        let _ = kill_process(Pid::from_child(&tracker.0), Signal::INT);
+    }
+    let _ = tracker.0.wait();
+    let mut out = String::new();
+    if let Some(mut stdout) = tracker.0.stdout.take() {
+        let _ = std::io::Read::read_to_string(&mut stdout, &mut out);
+    }
+    Ok(out)
+}
+
+/// How long the tracker may stay silent after the driver's last frame before the demo
+/// takes it that the remaining frames were dropped (a slow computer takes a frame longer).
+const QUIET_AFTER_DRIVER: Duration = Duration::from_secs(2);
+
+/// Whether, `QUIET_AFTER_DRIVER` after the driver finished at `done`, no pose has come for
+/// as long.
+fn all_quiet(done: Instant, last_pose_at: Instant) -> bool {
+    done.elapsed() > QUIET_AFTER_DRIVER && last_pose_at.elapsed() > QUIET_AFTER_DRIVER
+}
+
+/// Prints one row of the demo's table.
+fn print_pose(dataset: &TumDataset, world_from_model: &Pose, p: &ObjectPose) {
+    let error = ground_truth_error(dataset, world_from_model, p);
+    let t = p.translation_m;
+    println!(
+        "{:<18} {:<13} [{:+.3}, {:+.3}, {:+.3}] {:>9.2} {:>10.3} {:>10.2} {:>10}",
+        format_stamp(p.frame_stamp_ns),
+        status_label(p),
+        t[0],
+        t[1],
+        t[2],
+        p.quality,
+        p.free_space,
+        p.build_ms + p.register_ms,
+        error.map_or("-".into(), |e| format!("{:.1}", e * 1e3))
+    );
+}
+
+/// Says why frames got no pose: a tracker slower than the camera drops the frames a newer
+/// one replaced while it worked (buffer 1, as on a robot), and what to do to see them all.
+fn explain_dropped(frames: usize, rate_hz: f64, received: &[(ObjectPose, u64)]) {
+    let missing = frames.saturating_sub(received.len());
+    if missing == 0 {
+        return;
+    }
+    let track: Vec<f64> = received.iter().map(|(p, _)| f64::from(p.build_ms + p.register_ms)).collect();
+    let median = if track.is_empty() { "-".to_string() } else { format!("{:.1}", percentile(&track, 0.5)) };
+    let sent =
+        if rate_hz > 0.0 { format!("one every {:.1} ms", 1e3 / rate_hz) } else { "them as fast as it could".into() };
+    println!(
+        "demo: {missing} of {frames} frames got no pose. The tracker takes the newest frame and drops the ones \
+         that arrived while it worked, as it should on a robot; here it took {median} ms a frame (median) \
+         while the driver sent {sent}. `--rate {}` sends them slowly enough to see every frame.",
+        suggested_rate(&track)
+    );
+}
+
+/// A camera rate at which a tracker taking `track_ms` per frame keeps up with room to
+/// spare: a frame period of twice its slowest frame, at least 1 frame/s.
+fn suggested_rate(track_ms: &[f64]) -> u32 {
+    let slowest = track_ms.iter().copied().fold(0.0, f64::max);
+    if slowest <= 0.0 { 1 } else { ((1e3 / (2.0 * slowest)).floor() as u32).max(1) }
 }
 
 /// A pose's status in the demo's table.

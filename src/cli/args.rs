@@ -364,7 +364,9 @@ pub struct DemoArgs {
     /// Camera file of the dataset.
     #[arg(long, default_value = "robot_config/cameras/tum_fr3.toml")]
     pub camera: PathBuf,
-    /// Frames per second the driver sends.
+    /// Frames per second the driver sends (0: as fast as it can). A tracker slower than
+    /// that drops the frames a newer one replaced, as on a robot; the demo then says how
+    /// many got no pose and which rate would show every one.
     #[arg(long, default_value_t = 10.0)]
     pub rate: f64,
 }

@@ -142,6 +142,18 @@ pub fn odometry_job(dataset: PathBuf, out: PathBuf, threads: usize) -> mrsmap::a
     }
 }
 
+/// The frame rate for a camera driver in a test that expects every frame tracked:
+/// `default_hz`, or `MRSMAP_TEST_CAMERA_HZ` where that is set. A tracker slower than its
+/// camera drops the frames a newer one replaced, as it should; on a slow computer (an ARM
+/// board, an emulator) such tests need a slower camera, e.g. `MRSMAP_TEST_CAMERA_HZ=2`.
+pub fn camera_hz(default_hz: u32) -> String {
+    match std::env::var("MRSMAP_TEST_CAMERA_HZ") {
+        Ok(hz) if hz.parse::<f64>().is_ok_and(|h| h > 0.0 && h.is_finite()) => hz,
+        Ok(hz) => panic!("MRSMAP_TEST_CAMERA_HZ={hz}: give frames per second, a positive number"),
+        Err(_) => default_hz.to_string(),
+    }
+}
+
 /// The `mrsmap` binary built for the tests.
 pub fn mrsmap_bin() -> PathBuf {
     PathBuf::from(env!("CARGO_BIN_EXE_mrsmap"))
