@@ -266,12 +266,18 @@ fn bounce_next(current: usize, len: usize, backwards: &mut bool) -> usize {
     if *backwards { current - 1 } else { current + 1 }
 }
 
+/// Checks a driver's `--rate`: frames per second, finite and >= 0 (0: as fast as possible).
+pub(crate) fn check_rate(rate_hz: f64) -> Result<()> {
+    if !(rate_hz.is_finite() && rate_hz >= 0.0) {
+        bail!("--rate {rate_hz}: give frames per second, a number >= 0 (0: as fast as possible)");
+    }
+    Ok(())
+}
+
 /// Publishes the frames until their end (or forever with `repeat`), a signal, or
 /// `max_frames`.
 pub fn run(job: &CameraJob) -> Result<CameraSummary> {
-    if !(job.rate_hz.is_finite() && job.rate_hz >= 0.0) {
-        bail!("--rate must be a frequency >= 0 (0: as fast as possible)");
-    }
+    check_rate(job.rate_hz)?;
     let (source, size, what) = match &job.input {
         CameraInput::Dataset { dataset, camera } => open_dataset(job, dataset, camera)?,
         CameraInput::Mcap { .. } if job.repeat == Repeat::Bounce => {

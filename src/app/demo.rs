@@ -1,6 +1,7 @@
 //! `mrsmap demo`: the camera driver and the tracker as two processes on the frames the
 //! repository ships, with every pose printed next to its error against ground truth.
 
+use super::camera_driver::check_rate;
 use super::poses_client::camera_from_object;
 use super::report::percentile;
 use crate::eval::{ErrorStats, align_rigid};
@@ -55,9 +56,7 @@ fn check_paths(job: &DemoJob) -> Result<()> {
 
 /// Runs the demo; prints as it goes.
 pub fn run(job: &DemoJob) -> Result<()> {
-    if !(job.rate_hz.is_finite() && job.rate_hz >= 0.0) {
-        bail!("--rate {}: give frames per second, a number >= 0 (0: as fast as the driver can)", job.rate_hz);
-    }
+    check_rate(job.rate_hz)?;
     check_paths(job)?;
     let config = read_tracker_config(&job.config)?;
     let dataset = TumDataset::open(&job.dataset).with_context(|| format!("opening {}", job.dataset.display()))?;
@@ -215,7 +214,7 @@ fn print_pose(dataset: &TumDataset, world_from_model: &Pose, p: &ObjectPose) {
         t[2],
         p.quality,
         p.free_space,
-        p.build_ms + p.register_ms,
+        p.tracking_ms(),
         error.map_or("-".into(), |e| format!("{:.1}", e * 1e3))
     );
 }
@@ -227,7 +226,7 @@ fn explain_dropped(frames: usize, rate_hz: f64, received: &[(ObjectPose, u64)]) 
     if missing == 0 {
         return;
     }
-    let track: Vec<f64> = received.iter().map(|(p, _)| f64::from(p.build_ms + p.register_ms)).collect();
+    let track: Vec<f64> = received.iter().map(|(p, _)| f64::from(p.tracking_ms())).collect();
     let median = if track.is_empty() { "-".to_string() } else { format!("{:.1}", percentile(&track, 0.5)) };
     let sent =
         if rate_hz > 0.0 { format!("one every {:.1} ms", 1e3 / rate_hz) } else { "them as fast as it could".into() };
@@ -269,7 +268,7 @@ fn ground_truth_error(dataset: &TumDataset, world_from_model: &Pose, p: &ObjectP
 fn summarize(dataset: &TumDataset, world_from_model: &Pose, received: &[(ObjectPose, u64)]) {
     let tracked: Vec<&(ObjectPose, u64)> = received.iter().filter(|(p, _)| p.is_fresh()).collect();
     println!("demo: {} poses received, {} tracking", received.len(), tracked.len());
-    let track: Vec<f64> = tracked.iter().map(|(p, _)| f64::from(p.build_ms + p.register_ms)).collect();
+    let track: Vec<f64> = tracked.iter().map(|(p, _)| f64::from(p.tracking_ms())).collect();
     let latency: Vec<f64> =
         tracked.iter().map(|(p, at)| at.saturating_sub(p.frame_send_stamp_ns) as f64 * 1e-6).collect();
     if !track.is_empty() {

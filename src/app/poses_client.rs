@@ -232,7 +232,7 @@ fn handle(job: &PosesJob, p: &ObjectPose, objects: usize, reading: &mut Reading)
     let pose = camera_from_object(p);
     if p.status != status::INVALID_FRAME {
         push_recent(&mut summary.latency_ms, summary.timed, RECENT_SAMPLES, latency_ms);
-        push_recent(&mut summary.track_ms, summary.timed, RECENT_SAMPLES, f64::from(p.build_ms + p.register_ms));
+        push_recent(&mut summary.track_ms, summary.timed, RECENT_SAMPLES, f64::from(p.tracking_ms()));
         summary.timed += 1;
     }
     match job.print {
@@ -267,7 +267,7 @@ fn print_pose(p: &ObjectPose, name: &str, pose: &Pose, latency_ms: f64) {
         p.rotation_xyzw[3],
         p.quality,
         p.free_space,
-        p.build_ms + p.register_ms,
+        p.tracking_ms(),
         latency_ms
     );
 }

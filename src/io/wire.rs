@@ -325,6 +325,12 @@ impl ObjectPose {
         self.status == status::TRACKING && self.bad_frames == 0
     }
 
+    /// The time the tracker spent on this object for the frame (ms): its share of the
+    /// scene map and its registration.
+    pub fn tracking_ms(&self) -> f32 {
+        self.build_ms + self.register_ms
+    }
+
     /// Whether the pose is held: status tracking, but the frame's registration failed
     /// and the pose is the last good one.
     pub fn is_held(&self) -> bool {
