@@ -129,6 +129,15 @@ fn the_matching_likelihood_rejects_a_wrong_constraint() {
     let score = |b_from_a: &Pose| match_score(&a, &b, b_from_a, 0.01).total;
     let right = score(&truth.inverse());
     assert!(right > 0.0);
+    // The same score, bit for bit, on one thread and on two: its gains are summed in one
+    // fixed order, whichever worker computed them.
+    let on = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("a pool");
+        pool.install(|| match_score(&a, &b, &truth.inverse(), 0.01))
+    };
+    let (one, two) = (on(1), on(2));
+    assert!(one.surfels > 512, "{one:?}: the test needs more than one run of the sum");
+    assert_eq!((one.total.to_bits(), one.matched, one.surfels), (two.total.to_bits(), two.matched, two.surfels));
     // The score falls as the constraint moves away from the truth along every axis …
     let fraction = |t: Vector3<f64>, r: Vector3<f64>| {
         score(&(Pose::from_parts(Translation3::from(t), UnitQuaternion::from_scaled_axis(r)) * truth.inverse())) / right

@@ -23,8 +23,14 @@ pub const CHI2_FLOOR: f64 = 9.0;
 /// Cosine of the largest angle between matched normals (45°).
 const NORMAL_MIN_COS: f32 = std::f32::consts::FRAC_1_SQRT_2;
 
-/// Surfels per parallel work item (fixed: the sum does not depend on threads).
-const CHUNK: usize = 512;
+/// Surfels per parallel work item: small, so that the second worker takes a share of
+/// even a small object's few hundred surfels.
+const JOB_SURFELS: usize = 64;
+
+/// Surfels per partial sum. The gains are added in this fixed order, whatever the jobs
+/// and threads: within each run of `SUM_SURFELS` surfels, then the runs' sums in turn
+/// (the order of the score's first version, whose jobs were these runs).
+const SUM_SURFELS: usize = 512;
 
 /// The matching score of `a` against `b`.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -38,62 +44,85 @@ pub struct MatchScore {
 }
 
 /// Scores how well `b` explains `a` when `a`'s coordinates are mapped by `b_from_a`.
-/// Allocates a small buffer of partial sums; see [`MatchScratch`] for a version that
+/// Allocates a buffer of one gain per surfel; see [`MatchScratch`] for a version that
 /// does not.
 pub fn match_score(a: &SurfelMap, b: &SurfelMap, b_from_a: &Pose, regularization: f64) -> MatchScore {
     let mut scratch = MatchScratch::new(a.surfels().len());
     scratch.score(a, b, b_from_a, regularization)
 }
 
-/// Preallocated partial sums for [`match_score`] without allocation.
+/// What one surfel of `a` adds to the score.
+#[derive(Debug, Clone, Copy)]
+enum Gain {
+    /// Not usable, or at a level `b` does not have: not counted.
+    Skipped,
+    /// Counted, with no surfel of `b` within the floor.
+    Unmatched,
+    /// Counted and matched: `½(χ²_floor − m²) > 0`.
+    Matched(f64),
+}
+
+/// Preallocated per-surfel gains for [`match_score`] without allocation.
 #[derive(Debug, Clone, Default)]
 pub struct MatchScratch {
-    partial: Vec<(f64, usize, usize)>,
+    gains: Vec<Gain>,
 }
 
 impl MatchScratch {
     /// Room for maps of up to `surfels` surfels.
     pub fn new(surfels: usize) -> Self {
-        MatchScratch { partial: Vec::with_capacity(surfels.div_ceil(CHUNK)) }
+        MatchScratch { gains: Vec::with_capacity(surfels) }
     }
 
     /// [`match_score`] into the preallocated buffer (it grows if `a` is larger than it
-    /// was sized for). Per-chunk sums are added in chunk order: the result does not
-    /// depend on the number of threads.
+    /// was sized for). Each surfel's gain is computed in parallel; they are summed in
+    /// one fixed order ([`SUM_SURFELS`]): the result does not depend on the number of
+    /// threads.
     pub fn score(&mut self, a: &SurfelMap, b: &SurfelMap, b_from_a: &Pose, regularization: f64) -> MatchScore {
         let r = b_from_a.rotation.to_rotation_matrix().into_inner();
         let t = b_from_a.translation.vector;
         let rf = r.cast::<f32>();
         let near = DirCandidates::new(b_from_a, VIEW_DIR_MIN_COS);
-        self.partial.clear();
-        self.partial.resize(a.surfels().len().div_ceil(CHUNK), (0.0, 0, 0));
-        self.partial
-            .par_iter_mut()
-            .zip(a.surfels().par_chunks(CHUNK))
-            .zip(a.normals().par_chunks(CHUNK))
+        self.gains.clear();
+        self.gains.resize(a.surfels().len(), Gain::Skipped);
+        self.gains
+            .par_chunks_mut(JOB_SURFELS)
+            .zip(a.surfels().par_chunks(JOB_SURFELS))
+            .zip(a.normals().par_chunks(JOB_SURFELS))
             .item_jobs()
-            .for_each(|((acc, surfels), normals)| {
-                *acc = (0.0, 0, 0);
-                for (s, n) in surfels.iter().zip(normals) {
-                    if !s.usable() || s.level as usize >= b.num_levels() {
-                        continue;
-                    }
-                    acc.2 += 1;
-                    let level = s.level as usize;
-                    let res = b.resolution(level);
-                    let reg = Matrix3::identity() * (regularization * res * res);
-                    let p = r * s.mean.cast::<f64>() + t;
-                    let c = rotate_symmetric(&r, &s.cov()) + reg;
-                    let normal = rf * n;
-                    let best = best_match(b, level, &p, &c, &normal, near.of(s.dir), &reg);
-                    if best < CHI2_FLOOR {
-                        acc.0 += 0.5 * (CHI2_FLOOR - best);
-                        acc.1 += 1;
-                    }
+            .for_each(|((gains, surfels), normals)| {
+                for ((gain, s), n) in gains.iter_mut().zip(surfels).zip(normals) {
+                    *gain = if !s.usable() || s.level as usize >= b.num_levels() {
+                        Gain::Skipped
+                    } else {
+                        let level = s.level as usize;
+                        let res = b.resolution(level);
+                        let reg = Matrix3::identity() * (regularization * res * res);
+                        let p = r * s.mean.cast::<f64>() + t;
+                        let c = rotate_symmetric(&r, &s.cov()) + reg;
+                        let normal = rf * n;
+                        let best = best_match(b, level, &p, &c, &normal, near.of(s.dir), &reg);
+                        if best < CHI2_FLOOR { Gain::Matched(0.5 * (CHI2_FLOOR - best)) } else { Gain::Unmatched }
+                    };
                 }
             });
-        let (total, matched, surfels) = self.partial.iter().fold((0.0, 0, 0), |a, p| (a.0 + p.0, a.1 + p.1, a.2 + p.2));
-        MatchScore { total, matched, surfels }
+        let mut score = MatchScore { total: 0.0, matched: 0, surfels: 0 };
+        for run in self.gains.chunks(SUM_SURFELS) {
+            let mut total = 0.0;
+            for gain in run {
+                match *gain {
+                    Gain::Skipped => continue,
+                    Gain::Unmatched => {}
+                    Gain::Matched(g) => {
+                        total += g;
+                        score.matched += 1;
+                    }
+                }
+                score.surfels += 1;
+            }
+            score.total += total;
+        }
+        score
     }
 }
 
