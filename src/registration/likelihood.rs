@@ -76,7 +76,7 @@ impl MatchScratch {
 
     /// [`match_score`] into the preallocated buffer (it grows if `a` is larger than it
     /// was sized for). Each surfel's gain is computed in parallel; they are summed in
-    /// one fixed order ([`SUM_SURFELS`]): the result does not depend on the number of
+    /// one fixed order (runs of `SUM_SURFELS`): the result does not depend on the number of
     /// threads.
     pub fn score(&mut self, a: &SurfelMap, b: &SurfelMap, b_from_a: &Pose, regularization: f64) -> MatchScore {
         let r = b_from_a.rotation.to_rotation_matrix().into_inner();
