@@ -58,6 +58,9 @@ pub(crate) struct Aggregate {
     pub excluded_dirs: u8,
     /// Holds a foreground contour pixel (§3.4).
     pub border: bool,
+    /// The tracker's gate keeps every point of the cell (`CellGate::Inside`): the
+    /// pixels that join the aggregate need no test of their own.
+    pub gate_inside: bool,
     /// Index of the moments per view direction in the band's pool, `NONE` if unused.
     pub moments: [u32; 6],
     /// First point: the origin of the moments.
@@ -191,6 +194,17 @@ fn pack(level: usize, key: [i32; 3]) -> u64 {
 }
 
 const NO_CELL: u64 = u64::MAX;
+
+/// What the tracker's gate does with a point.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Kept {
+    /// Dropped.
+    No,
+    /// Kept, tested on its own (its cell straddles the gate's boundary).
+    Point,
+    /// Kept with every point of its cell (`CellGate::Inside`).
+    Cell,
+}
 
 /// Entries of a band's table of the cells the gate has decided (direct-mapped by cell).
 const GATE_CELL_SLOTS: usize = 1024;
@@ -336,7 +350,7 @@ impl Band {
         }
     }
 
-    /// Whether the gate keeps the camera-frame point `p` of cell `key` (`packed` with its
+    /// What the gate does with the camera-frame point `p` of cell `key` (`packed` with its
     /// level; `inv` = 1 / the cell size): decided once for the point's whole cell where
     /// the gate was prepared for cells and does not cut it (`GateCells`), else by testing
     /// the point. (A placed frame's cells are in another frame than the gate's points:
@@ -349,17 +363,18 @@ impl Band {
         key: [i32; 3],
         packed: u64,
         inv: f32,
-    ) -> bool {
+    ) -> Kept {
         let point = nalgebra::Vector3::from(p);
-        let Some(cells) = gate.cells.as_ref().filter(|_| !PLACED) else { return gate.keeps(&point) };
+        let tested = |keeps: bool| if keeps { Kept::Point } else { Kept::No };
+        let Some(cells) = gate.cells.as_ref().filter(|_| !PLACED) else { return tested(gate.keeps(&point)) };
         let entry = &mut self.gate_cells[gate_cell_slot(packed)];
         if entry.0 != packed {
             *entry = (packed, cells.classify(key, inv));
         }
         match entry.1 {
-            CellGate::Inside => true,
-            CellGate::Outside => false,
-            CellGate::Straddles => gate.keeps(&point),
+            CellGate::Inside => Kept::Cell,
+            CellGate::Outside => Kept::No,
+            CellGate::Straddles => tested(gate.keeps(&point)),
         }
     }
 
@@ -385,11 +400,20 @@ impl Band {
         // The point's cell in the camera frame (a placed point's is found below).
         let camera_key = [floor_near(x * inv), floor_near(y * inv), floor_near(z * inv)];
         let camera_packed = pack(level, camera_key);
+        // In camera coordinates, a pixel that joins an aggregate whose whole cell the gate
+        // keeps is kept without asking the gate again (its decision is the cell's).
+        let camera_joined =
+            if PLACED { NONE } else { self.neighbour_aggregate(u, &input.cols, first_row, camera_packed) };
+        let mut gate_inside = false;
         if GATED
             && let Some(gate) = input.gate
-            && !self.gate_keeps::<PLACED>(gate, [x, y, z], camera_key, camera_packed, inv)
+            && (camera_joined == NONE || !self.aggregates[camera_joined as usize].gate_inside)
         {
-            return (NO_CELL, NONE);
+            match self.gate_keeps::<PLACED>(gate, [x, y, z], camera_key, camera_packed, inv) {
+                Kept::No => return (NO_CELL, NONE),
+                Kept::Point => {}
+                Kept::Cell => gate_inside = true,
+            }
         }
         let (mut best_dir, mut near_dirs) = (ray.best_dir, ray.near_dirs);
         if PLACED && let Some(pl) = &input.placement {
@@ -411,7 +435,7 @@ impl Band {
         } else {
             (camera_key, camera_packed)
         };
-        let joined = self.neighbour_aggregate(u, &input.cols, first_row, packed);
+        let joined = if PLACED { self.neighbour_aggregate(u, &input.cols, first_row, packed) } else { camera_joined };
         let [l, a, b] = rgb8_to_lab(rgb[0], rgb[1], rgb[2]);
         let point = [x, y, z, l, a, b];
         let agg = if joined != NONE {
@@ -435,6 +459,7 @@ impl Band {
                 dir_mask: 0,
                 excluded_dirs: 0,
                 border: false,
+                gate_inside,
                 moments: [NONE; 6],
                 reference: point,
                 view_dir,

@@ -416,6 +416,7 @@ mod tests {
                 dir_mask: dirs,
                 excluded_dirs: 0,
                 border: false,
+                gate_inside: false,
                 moments,
                 reference,
                 view_dir,
