@@ -148,6 +148,9 @@ pub(crate) fn compute_descriptors(map: &mut SurfelMap, simple: &mut [Descriptor]
                         *a += weight * b;
                     }
                 }
+                // As in pass one: the sums stay in the descriptor's own order (plain
+                // 4-lane steps) instead of the rows of three `normalize_rows` reads.
+                sum = std::hint::black_box(sum);
                 normalize_rows(&mut sum);
             }
             *h = sum;
