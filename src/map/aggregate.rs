@@ -220,7 +220,7 @@ struct Pixel<'a> {
     depth: u16,
     ray: &'a PixelRay,
     flags: u8,
-    rgb: &'a [u8],
+    rgb: &'a [u8; 3],
 }
 
 /// One band of rows and its aggregates.
@@ -298,6 +298,13 @@ impl Band {
             self.gate_cells.fill((NO_CELL, CellGate::Straddles));
         }
         let cols = input.cols.clone();
+        // A pixel enters with a depth in `lo..=hi`: with a gate, the range of its depths
+        // (mostly the background behind the object, seen through the gate's image, is
+        // beyond it); else any measured depth (0: none). One unsigned comparison per
+        // pixel; an empty range keeps nothing.
+        let (lo, hi) = if GATED { input.gate_depth_raw } else { (1, u16::MAX) };
+        let (kept_lo, kept_width) = if lo <= hi { (lo as u32, (hi - lo) as u32) } else { (u32::MAX, 0) };
+        let kept = |d: u16| (d as u32).wrapping_sub(kept_lo) <= kept_width;
         for v in self.rows.clone() {
             let first_row = v == self.rows.start;
             // With a gate, only the columns whose rays can meet it: the others give no
@@ -308,25 +315,26 @@ impl Band {
             };
             self.cur[cols.start..span.start].fill((NO_CELL, NONE));
             self.cur[span.end..cols.end].fill((NO_CELL, NONE));
-            // The row's pixels as slices, read in step (no index checks per pixel).
+            // The row's pixels as slices of one length `n`: indexing below `n` needs no
+            // checks per pixel.
             let (start, end) = (v * width + span.start, v * width + span.end);
-            let pixels = frame.depth[start..end]
-                .iter()
-                .zip(&input.rays[start..end])
-                .zip(&input.flags[start..end])
-                .zip(frame.rgb[3 * start..3 * end].chunks_exact(3));
-            for (u, (((&d, ray), &flags), rgb)) in span.clone().zip(pixels) {
-                // Beyond the gate's depths (mostly the background behind the object, seen
-                // through the gate's image) a pixel is dropped before any other work; the
-                // first of those depths is at least 1 (0: no measurement).
-                let dropped =
-                    if GATED { !(d >= input.gate_depth_raw.0 && d <= input.gate_depth_raw.1) } else { d == 0 };
-                let cell = if dropped {
-                    (NO_CELL, NONE)
-                } else {
-                    self.pixel::<GATED, PLACED, SMOOTH>(input, Pixel { depth: d, ray, flags, rgb }, u, first_row, scale)
-                };
-                self.cur[u] = cell;
+            let depth = &frame.depth[start..end];
+            let n = depth.len();
+            let (rays, flags) = (&input.rays[start..end][..n], &input.flags[start..end][..n]);
+            let rgb = &frame.rgb[3 * start..3 * end].as_chunks::<3>().0[..n];
+            let mut i = 0;
+            while i < n {
+                let (d, u) = (depth[i], span.start + i);
+                if !kept(d) {
+                    // A run of dropped pixels: no cell, found by a scan of the depths alone.
+                    let run = 1 + depth[i + 1..].iter().position(|&d| kept(d)).unwrap_or(n - i - 1);
+                    self.cur[u..u + run].fill((NO_CELL, NONE));
+                    i += run;
+                    continue;
+                }
+                let pixel = Pixel { depth: d, ray: &rays[i], flags: flags[i], rgb: &rgb[i] };
+                self.cur[u] = self.pixel::<GATED, PLACED, SMOOTH>(input, pixel, u, first_row, scale);
+                i += 1;
             }
             std::mem::swap(&mut self.prev, &mut self.cur);
         }
