@@ -1,6 +1,6 @@
 //! Shape–texture descriptors (paper §3.2).
 //!
-//! For a surfel `i` and each usable neighbour `j` of the same view direction in its
+//! For a surfel `i` and each valid neighbour `j` of the same view direction in its
 //! 26-neighbourhood, with `d̂` the unit vector between their means, the shape relations
 //! `nᵢ·d̂`, `nⱼ·d̂`, `nᵢ·nⱼ` and the texture relations `ΔL`, `Δα`, `Δβ` (`j − i`) are each
 //! soft-binned into three bins and summed, weighted by the neighbour's point count; the
@@ -103,7 +103,9 @@ fn neighbor_surfels<'a>(surfels: &'a [Surfel], row: &'a [u32; 27]) -> impl Itera
     })
 }
 
-/// Computes the descriptors of all valid surfels; `simple` is scratch of the same length.
+/// Computes the descriptors of all usable surfels, the only ones association compares
+/// (a valid surfel that is not usable has its simple descriptor, which its neighbours'
+/// descriptors need); `simple` is scratch of the same length.
 pub(crate) fn compute_descriptors(map: &mut SurfelMap, simple: &mut [Descriptor]) {
     let inv_theta = 1.0 / map.params.texture_bin_threshold;
     let scale: Relations = [1.0, 1.0, 1.0, inv_theta, inv_theta, inv_theta, 0.0, 0.0];
@@ -140,9 +142,10 @@ pub(crate) fn compute_descriptors(map: &mut SurfelMap, simple: &mut [Descriptor]
         for (k, h) in out.iter_mut().enumerate() {
             let idx = c * CHUNK + k;
             let me = &surfels[idx];
-            // Summed in a local array (vector registers), stored once.
+            // Summed in a local array (vector registers), stored once. Only a usable
+            // surfel's is read (by association, §4.1): the others keep their simple one.
             let mut sum = simple[idx];
-            if me.valid {
+            if me.usable {
                 for (s, _) in neighbor_surfels(surfels, &rows[idx]) {
                     for (a, b) in sum.iter_mut().zip(&simple[s as usize]) {
                         *a += weight * b;
