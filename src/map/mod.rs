@@ -223,7 +223,9 @@ impl SurfelMap {
         &self.surfel_neighbors[surfel as usize]
     }
 
-    /// The shape–texture descriptors, parallel to [`Self::surfels`].
+    /// The shape–texture descriptors, parallel to [`Self::surfels`]: in full for the
+    /// usable surfels (the ones registration compares); a valid surfel that is not usable
+    /// has its own relations only, without its neighbours' descriptors added.
     pub fn descriptors(&self) -> &[Descriptor] {
         &self.descriptors
     }
