@@ -177,12 +177,16 @@ pub(crate) struct AggregationInput<'a> {
     pub cols: std::ops::Range<usize>,
     /// Tracking: only the points this gate keeps enter (paper §5.2).
     pub gate: Option<&'a PixelGate>,
-    /// With a gate: the raw depths (first, last) within the camera-frame depths outside
-    /// which it keeps no point (`PixelGate::camera_depth_range`, `raw_depth_interval`).
+    /// The raw depths (first, last) a pixel needs to enter: with a gate, those within the
+    /// camera-frame depths outside which it keeps no point (`PixelGate::camera_depth_range`,
+    /// `raw_depth_interval`; first > last if none); without, [`MEASURED_DEPTHS`].
     pub gate_depth_raw: (u16, u16),
     /// With a gate: per row, the columns whose rays can meet it (the others are skipped).
     pub spans: Option<&'a RowSpans>,
 }
+
+/// The raw depths a pixel without a gate needs to enter: every measured one (0: none).
+pub(crate) const MEASURED_DEPTHS: (u16, u16) = (1, u16::MAX);
 
 /// Packs level and key into one comparable word (`u64::MAX` = no cell).
 #[inline]
@@ -298,11 +302,12 @@ impl Band {
             self.gate_cells.fill((NO_CELL, CellGate::Straddles));
         }
         let cols = input.cols.clone();
-        // A pixel enters with a depth in `lo..=hi`: with a gate, the range of its depths
-        // (mostly the background behind the object, seen through the gate's image, is
-        // beyond it); else any measured depth (0: none). One unsigned comparison per
-        // pixel; an empty range keeps nothing.
-        let (lo, hi) = if GATED { input.gate_depth_raw } else { (1, u16::MAX) };
+        // A pixel enters with a depth in `lo..=hi` (`gate_depth_raw`; with a gate, most of
+        // the background behind the object, seen through the gate's image, is beyond it):
+        // one unsigned comparison per pixel. An empty range keeps nothing. Without a gate
+        // the range is the constant, which the compiler folds into the loop (read from
+        // `input`, the map building of odometry took 4 % more instructions).
+        let (lo, hi) = if GATED { input.gate_depth_raw } else { MEASURED_DEPTHS };
         let (kept_lo, kept_width) = if lo <= hi { (lo as u32, (hi - lo) as u32) } else { (u32::MAX, 0) };
         let kept = |d: u16| (d as u32).wrapping_sub(kept_lo) <= kept_width;
         for v in self.rows.clone() {

@@ -1,7 +1,7 @@
 //! Building a map from one RGB-D image (paper §3.3, §3.4).
 
 use super::SurfelMap;
-use super::aggregate::{AggregationInput, BAND_ROWS, Band, Placement};
+use super::aggregate::{AggregationInput, BAND_ROWS, Band, MEASURED_DEPTHS, Placement};
 use super::assemble::Assembly;
 use super::border::{BorderScratch, mark_borders};
 use super::jobs::ItemJobs;
@@ -213,7 +213,7 @@ impl MapBuilder {
             placement,
             cols: point_cols,
             gate: region.gate.as_ref(),
-            gate_depth_raw: region.gate.as_ref().map_or((1, u16::MAX), |g| {
+            gate_depth_raw: region.gate.as_ref().map_or(MEASURED_DEPTHS, |g| {
                 raw_depth_interval(g.camera_depth_range(), frame.camera.depth_scale_m as f32)
             }),
             spans: region.spans.as_ref(),

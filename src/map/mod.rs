@@ -225,7 +225,8 @@ impl SurfelMap {
 
     /// The shape–texture descriptors, parallel to [`Self::surfels`]: in full for the
     /// usable surfels (the ones registration compares); a valid surfel that is not usable
-    /// has its own relations only, without its neighbours' descriptors added.
+    /// has its first-pass descriptor (its relations to its neighbours), without their
+    /// descriptors added.
     pub fn descriptors(&self) -> &[Descriptor] {
         &self.descriptors
     }
