@@ -158,20 +158,21 @@ fn scan_band(input: &ScanInput, rows: Range<usize>, flags: &mut [u8], ends: &mut
             *o = d * d * f;
         }
         let row_r2 = &work.r2[LANES..LANES + n];
-        let here = work.r2[LANES..LANES + lanes].as_chunks::<LANES>().0;
-        let left = work.r2[LANES - 1..LANES - 1 + lanes].as_chunks::<LANES>().0;
-        let above = work.last_r2.as_chunks_mut::<LANES>().0;
-        for (g, ((h, l), a)) in here.iter().zip(left).zip(above.iter_mut()).enumerate() {
-            let (h, l, a_r2) = (f32x4::from(*h), f32x4::from(*l), f32x4::from(*a));
+        // The groups as slices of one length, visited by index: the loop keeps its state
+        // in registers (zipped iterators kept theirs on the stack, around the rare call).
+        let groups = lanes / LANES;
+        let here = &work.r2[LANES..LANES + lanes].as_chunks::<LANES>().0[..groups];
+        let left = &work.r2[LANES - 1..LANES - 1 + lanes].as_chunks::<LANES>().0[..groups];
+        let above = &mut work.last_r2.as_chunks_mut::<LANES>().0[..groups];
+        for g in 0..groups {
+            let (h, l, a_r2) = (f32x4::from(here[g]), f32x4::from(left[g]), f32x4::from(above[g]));
             let jump = |p: f32x4| p.simd_lt(j2 * h) | (p * j2).simd_gt(h);
             let valid = h.simd_gt(zero);
-            let mut to_mark = (valid & (jump(l) | jump(a_r2))).to_bitmask();
-            while to_mark != 0 {
-                let k = to_mark.trailing_zeros() as usize;
-                to_mark &= to_mark - 1;
-                mark_pixel(input, (flags, &mut *ends), (&rows, v), (g * LANES + k, row_r2), a[k]);
+            let to_mark = (valid & (jump(l) | jump(a_r2))).to_bitmask();
+            if to_mark != 0 {
+                mark_group(input, (flags, &mut *ends), (&rows, v), (g, to_mark, row_r2), &above[g]);
             }
-            *a = valid.select(h, a_r2).to_array();
+            above[g] = valid.select(h, a_r2).to_array();
         }
         // The row's last valid pixel lies on a border.
         if let Some(i) = row_r2.iter().rposition(|&r| r > 0.0) {
@@ -183,6 +184,25 @@ fn scan_band(input: &ScanInput, rows: Range<usize>, flags: &mut [u8], ends: &mut
         if r2 > 0.0 {
             (e.last, e.last_r2) = (last_valid_above(input, &rows, rows.end, u) as u32, r2);
         }
+    }
+}
+
+/// [`mark_pixel`] for the pixels of group `g` (columns `g · LANES ..` of the region)
+/// whose bits `to_mark` sets; `above_r2` holds the group's squared ranges of the last
+/// valid pixels above them. Out of line: few groups have a pixel to mark.
+#[cold]
+#[inline(never)]
+fn mark_group(
+    input: &ScanInput,
+    (flags, ends): (&mut [u8], &mut [ColumnEnds]),
+    (rows, v): (&Range<usize>, usize),
+    (g, mut to_mark, row_r2): (usize, u32, &[f32]),
+    above_r2: &[f32; LANES],
+) {
+    while to_mark != 0 {
+        let k = to_mark.trailing_zeros() as usize;
+        to_mark &= to_mark - 1;
+        mark_pixel(input, (flags, &mut *ends), (rows, v), (g * LANES + k, row_r2), above_r2[k]);
     }
 }
 
