@@ -281,10 +281,15 @@ impl Tracker {
         let object = &mut self.objects[k];
         let result = register(&object.model, &object.scene, &object.prior, &object.registration, &mut object.workspace);
         let (quality, free_space) = match &result {
-            Ok(r) => (
-                quality(object, &r.model_from_scene, p.registration.covariance_regularization),
-                object.free_space.measure(frame, &r.model_from_scene.inverse(), p.free_space_margin_m).fraction(),
-            ),
+            // The two checks are independent: the free space (one thread's loop) runs
+            // beside the quality score's parallel jobs instead of after them.
+            Ok(r) => {
+                let TrackedObject { scratch, scene, model, free_space, .. } = &mut *object;
+                rayon::join(
+                    || quality(scratch, scene, model, &r.model_from_scene, p.registration.covariance_regularization),
+                    || free_space.measure(frame, &r.model_from_scene.inverse(), p.free_space_margin_m).fraction(),
+                )
+            }
             Err(_) => (0.0, 0.0),
         };
         let min_quality = if object.tracking { p.min_quality } else { p.min_quality_initialise };
@@ -343,8 +348,14 @@ struct Attempt {
 
 /// The matching log-likelihood gain per usable scene surfel at `object_from_camera`,
 /// over its value for a perfect match (`½(χ²_floor − 3)` = 3).
-fn quality(object: &mut TrackedObject, object_from_camera: &Pose, regularization: f64) -> f64 {
-    let score = object.scratch.score(&object.scene, &object.model, object_from_camera, regularization);
+fn quality(
+    scratch: &mut MatchScratch,
+    scene: &SurfelMap,
+    model: &SurfelMap,
+    object_from_camera: &Pose,
+    regularization: f64,
+) -> f64 {
+    let score = scratch.score(scene, model, object_from_camera, regularization);
     if score.surfels == 0 { 0.0 } else { score.total / score.surfels as f64 / 3.0 }
 }
 
