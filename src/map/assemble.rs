@@ -193,11 +193,14 @@ impl Assembly {
         let chunks = insert_chunks(&self.by_level, &self.target, &map.tree.nodes, map.surfels.len());
         let nodes = &map.tree.nodes;
         let mut work: heapless::Vec<InsertWork, MAX_INSERT_CHUNKS> = heapless::Vec::new();
+        // The surfels before the first run receive no aggregate; the runs cover the rest.
+        let unreached = chunks.first().map_or(map.stats.len(), |c| c.first_surfel);
+        map.stats[..unreached].fill(SurfelStats::EMPTY);
+        map.view_dirs[..unreached].fill([0.0; 3]);
         let (mut stats, mut view_dirs) = (&mut map.stats[..], &mut map.view_dirs[..]);
         let mut offset = 0;
         for (c, chunk) in chunks.iter().enumerate() {
             let end = chunks.get(c + 1).map_or(stats.len() + offset, |next| next.first_surfel);
-            // Surfels before the run that no run writes stay as they are.
             let (_, s_tail) = std::mem::take(&mut stats).split_at_mut(chunk.first_surfel - offset);
             let (_, v_tail) = std::mem::take(&mut view_dirs).split_at_mut(chunk.first_surfel - offset);
             let (s_mine, s_rest) = s_tail.split_at_mut(end - chunk.first_surfel);
@@ -208,6 +211,9 @@ impl Assembly {
         }
         let (order, target) = (&self.order, &self.target);
         work.as_mut_slice().par_iter_mut().item_jobs().for_each(|InsertWork { chunk, stats, view_dirs }| {
+            // The run's surfels start empty (the arrays were only sized, not filled).
+            stats.fill(SurfelStats::EMPTY);
+            view_dirs.fill([0.0; 3]);
             for &k in &self.by_level[chunk.positions.clone()] {
                 let (_, b, i) = order[k as usize];
                 let band = &bands[b as usize];
@@ -299,8 +305,10 @@ fn push_chunk(
 /// Creates one surfel per node and used view direction, in node order (so surfels
 /// are level-contiguous too). Returns the number that did not fit.
 ///
-/// The per-surfel arrays that start out constant (statistics, normals, view
-/// directions: 250 bytes per surfel) are filled in parallel, within their capacity.
+/// The per-surfel statistics, normals and view directions (250 bytes per surfel) are
+/// only sized here: insertion starts the statistics and view directions of each run's
+/// surfels on the thread that fills them, and the normals are estimated for every
+/// surfel.
 fn assign_surfels(map: &mut SurfelMap) -> usize {
     let mut dropped = 0;
     let capacity = map.surfel_capacity();
@@ -318,17 +326,10 @@ fn assign_surfels(map: &mut SurfelMap) -> usize {
         }
     }
     let n = map.surfels.len();
-    refill(&mut map.stats, SurfelStats::EMPTY, n);
-    refill(&mut map.normals, nalgebra::Vector3::zeros(), n);
-    refill(&mut map.view_dirs, [0.0; 3], n);
+    resize_for_overwrite(&mut map.stats, SurfelStats::EMPTY, n);
+    resize_for_overwrite(&mut map.normals, nalgebra::Vector3::zeros(), n);
+    resize_for_overwrite(&mut map.view_dirs, [0.0; 3], n);
     dropped
-}
-
-/// Makes `v` hold `n` copies of `value`, written in parallel (no allocation within the
-/// capacity): per-surfel arrays of a VGA map hold megabytes.
-fn refill<T: Clone + Send + Sync>(v: &mut Vec<T>, value: T, n: usize) {
-    v.clear();
-    v.par_extend(rayon::iter::repeat_n(value, n));
 }
 
 /// Sums children into parents, level by level from the finest (so every inner node

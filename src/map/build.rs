@@ -290,14 +290,15 @@ mod tests {
         let frame = RgbdFrame::new(0, camera, &rgb, &depth).expect("consistent frame");
         let capacity = MapCapacity::for_image(320 * 240);
         let new_map = || SurfelMap::new(MapParams::default(), capacity).expect("valid parameters");
-        // Everything per surfel, its descriptor, normal and neighbourhoods included: the
-        // scratch a builder (and a map) reuses must not carry anything over from earlier
-        // frames.
+        // Everything per surfel, its statistics, view direction, descriptor, normal and
+        // neighbourhoods included: the scratch a builder (and a map) reuses must not carry
+        // anything over from earlier frames.
         let surfels = |map: &SurfelMap| {
             let per_surfel = map.surfels().iter().zip(map.descriptors()).zip(map.normals()).enumerate();
             let rows = |i: usize, s: &crate::map::Surfel| (*map.surfel_neighbors(i as u32), *map.neighbors(s.node));
+            let stats = |s: &crate::map::Surfel| (s.count, s.mean, s.cov_packed, s.color);
             per_surfel
-                .map(|(i, ((s, d), n))| (s.node, s.dir, s.count, s.mean, s.valid, *d, *n, rows(i, s)))
+                .map(|(i, ((s, d), n))| (s.node, s.dir, stats(s), s.valid, map.view_dirs[i], *d, *n, rows(i, s)))
                 .collect::<Vec<_>>()
         };
         // A builder that has seen other regions of the frame before…

@@ -198,6 +198,8 @@ pub(crate) fn estimate_normals(map: &mut SurfelMap, raw: &[RawMoments]) {
         |(c, (surfels, normals))| {
             for (k, (s, normal)) in surfels.iter_mut().zip(normals.iter_mut()).enumerate() {
                 if !s.valid {
+                    // Every entry is written: the array is sized only (`assign_surfels`).
+                    *normal = Vector3::zeros();
                     continue;
                 }
                 let idx = c * CHUNK + k;
@@ -218,6 +220,7 @@ pub(crate) fn estimate_normals(map: &mut SurfelMap, raw: &[RawMoments]) {
                         *normal = if facing > 0.0 { -n } else { n };
                     }
                     None => {
+                        *normal = Vector3::zeros();
                         s.valid = false;
                         s.usable = false;
                     }

@@ -142,21 +142,23 @@ impl SurfelMap {
     /// Removes every node and surfel, keeping the storage.
     pub fn clear(&mut self) {
         self.clear_for_rebuild();
+        self.stats.clear();
+        self.normals.clear();
+        self.view_dirs.clear();
         self.tree.neighbors.clear();
         self.descriptors.clear();
         self.surfel_neighbors.clear();
     }
 
     /// Removes every node and surfel before the map is assembled anew, keeping as scratch
-    /// the tables that assembly writes in full, row by row (node and surfel neighbourhoods,
-    /// descriptors): it sizes them with [`resize_for_overwrite`], so that the rows an
-    /// earlier map left are not filled only to be overwritten (~1.3 MB per VGA frame).
+    /// the arrays that assembly writes in full: the node and surfel neighbourhoods and
+    /// the descriptors (~1.3 MB per VGA frame), and the statistics, normals and view
+    /// directions (250 bytes per surfel, ~1.1 MB). It sizes them with
+    /// [`resize_for_overwrite`], so that the entries an earlier map left are not filled
+    /// only to be overwritten.
     pub(crate) fn clear_for_rebuild(&mut self) {
         self.tree.clear(self.params.num_levels);
-        self.stats.clear();
         self.surfels.clear();
-        self.normals.clear();
-        self.view_dirs.clear();
     }
 
     /// The parameters the map was built with.
