@@ -33,6 +33,17 @@ fn step(tracker: &mut Tracker, t: &RenderTarget, k: u64) -> PoseEstimate {
 
 #[test]
 fn tracks_loses_and_reinitialises() {
+    tracks_loses_and_reinitialises_with(TrackerParams::default());
+}
+
+#[test]
+fn tracks_loses_and_reinitialises_starting_each_frame_from_the_last_matches() {
+    let mut params = TrackerParams::default();
+    params.registration.start_from_last_matches = true;
+    tracks_loses_and_reinitialises_with(params);
+}
+
+fn tracks_loses_and_reinitialises_with(params: TrackerParams) {
     let mesh = room(5);
     let cam = vga();
     // The camera moves 7 mm and 0.2° per frame (object frame = first camera frame); the
@@ -42,8 +53,7 @@ fn tracks_loses_and_reinitialises() {
     let frames: Vec<RenderTarget> = poses.iter().map(|p| render_frame(&mesh, cam, p)).collect();
     let views = [(&frames[0], poses[0]), (&frames[6], poses[6]), (&frames[11], poses[11])];
     let mut tracker =
-        Tracker::new(TrackerParams::default(), cam.width as usize, cam.height as usize, vec![object_model(&views)])
-            .expect("tracker");
+        Tracker::new(params, cam.width as usize, cam.height as usize, vec![object_model(&views)]).expect("tracker");
     let mut last_good = Pose::identity();
     for (k, (t, truth)) in frames.iter().zip(&poses).enumerate() {
         let e = step(&mut tracker, t, k as u64);

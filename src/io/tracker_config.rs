@@ -208,6 +208,7 @@ struct RawTracker {
     coarsest_level: Option<usize>,
     step_tolerance: Option<f64>,
     confirm_convergence: Option<bool>,
+    start_from_last_matches: Option<bool>,
     covariance: Option<String>,
     covariance_scale: Option<f64>,
 }
@@ -265,6 +266,8 @@ pub fn parse_tracker_config(text: &str, origin: &Path) -> Result<TrackerConfig, 
     }
     params.registration.confirm_with_fresh_associations =
         t.confirm_convergence.unwrap_or(params.registration.confirm_with_fresh_associations);
+    params.registration.start_from_last_matches =
+        t.start_from_last_matches.unwrap_or(params.registration.start_from_last_matches);
     if let Some(name) = &t.covariance {
         params.covariance = CovarianceModel::from_name(name).ok_or_else(|| {
             invalid(format!("tracker.covariance = {name:?}: expected \"eq6\" (Eq. 6 of the paper) or \"clustered\""))
@@ -434,6 +437,16 @@ mod tests {
         assert!(!c.params.registration.confirm_with_fresh_associations);
         let typed = GOOD.replace("[camera]", "[tracker]\nconfirm_convergence = 1\n[camera]");
         assert!(parse_tracker_config(&typed, p).unwrap_err().to_string().contains("confirm_convergence"));
+    }
+
+    #[test]
+    fn the_first_pass_from_the_last_matches_is_asked_for() {
+        let p = Path::new("t.toml");
+        assert!(!parse_tracker_config(GOOD, p).expect("valid").params.registration.start_from_last_matches);
+        let on = GOOD.replace("[camera]", "[tracker]\nstart_from_last_matches = true\n[camera]");
+        assert!(parse_tracker_config(&on, p).expect("valid").params.registration.start_from_last_matches);
+        let typed = GOOD.replace("[camera]", "[tracker]\nstart_from_last_matches = \"yes\"\n[camera]");
+        assert!(parse_tracker_config(&typed, p).unwrap_err().to_string().contains("start_from_last_matches"));
     }
 
     #[test]

@@ -5,8 +5,9 @@
 //!
 //! 1. associate surfels across resolutions (§4.1, `associate.rs`);
 //! 2. Levenberg–Marquardt on the weighted least squares of Eq. (5), re-associating
-//!    after every accepted step (bootstrapped from the previous matches) and once from
-//!    scratch before declaring convergence;
+//!    after every accepted step (bootstrapped from the previous matches; the first pass
+//!    from scratch, or in tracking optionally from the last registration's matches) and
+//!    once from scratch before declaring convergence;
 //! 3. Newton's method on the log-likelihood of Eq. (4) with trilinear interpolation of
 //!    the model surfels (§4.3), keeping the best iterate;
 //! 4. the pose covariance in closed form, Eq. (6).
@@ -142,7 +143,11 @@ pub fn register(
     let model_contours = model.contour_levels();
     let mut solver = Solver { model, scene, params, ws, pose: *initial, lm_system: None, model_contours };
     let result = solver.solve();
-    solver.ws.remember_matches_of(scene);
+    // Seeds come only from a registration that succeeded.
+    match result {
+        Ok(_) => solver.ws.remember_matches_of(scene),
+        Err(_) => solver.ws.forget_matches(),
+    }
     result
 }
 
@@ -257,8 +262,15 @@ impl Solver<'_> {
     fn levenberg_marquardt(&mut self) -> Result<(usize, bool), RegistrationError> {
         let p = self.params;
         let interpolate = p.interpolate_lm;
-        let mut fresh = true;
-        let mut sys = self.associate_enough(fresh, Sum::LmSystem, interpolate)?;
+        // The first pass from the last registration's matches, if asked and remembered
+        // (too few of them still matching: from scratch after all).
+        let mut fresh = !(p.start_from_last_matches && self.ws.plant_seeds(self.scene, self.model));
+        let mut sys = self.associate(fresh, Sum::LmSystem, interpolate, false);
+        if !fresh && self.enough(&sys).is_err() {
+            fresh = true;
+            sys = self.associate(fresh, Sum::LmSystem, interpolate, false);
+        }
+        self.enough(&sys)?;
         let max_diag = (0..6).map(|i| sys.hessian[(i, i)]).fold(0.0, f64::max);
         let mut mu = p.lm_tau * max_diag;
         let mut nu = 2.0;

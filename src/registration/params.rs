@@ -70,6 +70,18 @@ pub struct RegistrationParams {
     /// odometry (docs/benchmarks-history.md, stop 32). On for the tracker. (A step right after a
     /// rejected one is always tested first: most of those are rejected again.)
     pub test_small_steps_first: bool,
+    /// Start LM's first association pass from the matches of the last successful
+    /// registration against the same model (a tracker's last frame,
+    /// [`super::RegistrationWorkspace::remember_matches`]): each scene node whose cell
+    /// matched a model node of its level then searches that node's 27-neighbourhood,
+    /// as LM's later passes search around their previous match (§4.1), instead of a cube
+    /// around it. The paper searches the first pass from scratch; LM still converges
+    /// only after a pass searched from scratch (`confirm_with_fresh_associations`).
+    /// Without a memory the first pass searches from scratch as before. Trajectories
+    /// change; measured on fr3_teddy tracking: 2–5 % of the step's time, ATE as good
+    /// (docs/benchmarks.md, "Trading accuracy for time in the tracker"). Off by
+    /// default, in the tracker too (docs/benchmarks.md, "Stop 84's change", says why).
+    pub start_from_last_matches: bool,
     /// Interpolate model surfels trilinearly in the Newton stage (§4.3).
     pub interpolate: bool,
     /// Interpolate model surfels in the LM stage as well. The original does not; without
@@ -139,6 +151,7 @@ impl Default for RegistrationParams {
             step_tolerance_rad: 5e-4,
             confirm_with_fresh_associations: true,
             test_small_steps_first: false,
+            start_from_last_matches: false,
             interpolate: true,
             interpolate_lm: true,
             min_associations: 30,

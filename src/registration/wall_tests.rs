@@ -5,7 +5,8 @@
 //! covariance with and without its Jacobian, which matches finite differences (as does
 //! the blended colour's, for the colour term); and
 //! registrations that start their searches from the last one's matches give the same
-//! results as registrations without them.
+//! results as registrations without them, or, with a first pass from those matches
+//! (`start_from_last_matches`), search around them and end as well.
 
 use super::associate::{AssociationInput, DirCandidates, associate};
 use super::evaluate::{Sum, SumInput, interpolate, slot_offsets};
@@ -195,4 +196,54 @@ fn matches_remembered_from_the_last_registration_change_nothing_but_the_order_of
     let seeded = register(&other, &scene, &nudged, &params, &mut remembering);
     let plain = register(&other, &scene, &nudged, &params, &mut RegistrationWorkspace::new(scene.nodes().len()));
     assert_eq!(format!("{seeded:?}"), format!("{plain:?}"), "another model");
+}
+
+#[test]
+fn a_first_pass_from_the_last_matches_searches_around_them_and_lm_ends_where_it_does_from_scratch() {
+    let (model, scene) = (wall(false), wall(true));
+    let params = RegistrationParams { start_from_last_matches: true, ..RegistrationParams::default() };
+    let fresh_ws = || RegistrationWorkspace::new(scene.nodes().len());
+    let mut remembering = fresh_ws();
+    remembering.remember_matches();
+    let nudged = compose_left(&Vector6::new(0.004, -0.003, 0.002, 0.01, -0.005, 0.003), &Pose::identity());
+    // Without a memory the first pass searches from scratch: the paper's registration.
+    let first = register(&model, &scene, &nudged, &params, &mut remembering);
+    let plain = register(&model, &scene, &nudged, &params, &mut fresh_ws());
+    assert_eq!(format!("{first:?}"), format!("{plain:?}"));
+    // The next registration starts near where that one ended, as a tracker's next frame.
+    let last = first.expect("registers").model_from_scene;
+    let start = compose_left(&Vector6::new(0.003, 0.002, -0.002, -0.004, 0.003, 0.002), &last);
+    // One pass alone (no LM step, no Newton): the remembered matches' neighbourhoods were
+    // searched (a cube only where a node has none), and matched about as many nodes as
+    // cubes do from scratch.
+    let one_pass = RegistrationParams { lm_max_iterations: 0, newton_iterations: 0, ..params };
+    let matched_by =
+        |ws: &RegistrationWorkspace, cube: bool| ws.assoc.iter().filter(|a| a.is_matched() && a.cube == cube).count();
+    let mut seeded_ws = remembering.clone();
+    let _ = register(&model, &scene, &start, &one_pass, &mut seeded_ws);
+    let mut plain_ws = fresh_ws();
+    let _ = register(&model, &scene, &start, &one_pass, &mut plain_ws);
+    let (around, in_cubes, cubes) =
+        (matched_by(&seeded_ws, false), matched_by(&seeded_ws, true), matched_by(&plain_ws, true));
+    assert_eq!(matched_by(&plain_ws, false), 0);
+    assert!(
+        around > 10 * in_cubes && around as f64 >= 0.9 * cubes as f64 && cubes > 500,
+        "{around} matched around the seeds and {in_cubes} in cubes, {cubes} in cubes from scratch"
+    );
+    // The whole registration still ends after a pass from scratch, at the same optimum.
+    let seeded = register(&model, &scene, &start, &params, &mut remembering).expect("registers");
+    let plain = register(&model, &scene, &start, &params, &mut fresh_ws()).expect("registers");
+    let d = seeded.model_from_scene * plain.model_from_scene.inverse();
+    // (The wall holds the pose loosely, its halves disagree by 28 mm: the two paths of LM
+    // end about a millimetre apart, equally good.)
+    assert!(seeded.converged && plain.converged);
+    assert!(seeded.mean_mahalanobis2 <= 1.01 * plain.mean_mahalanobis2, "{seeded:?} {plain:?}");
+    assert!(seeded.associations as f64 >= 0.98 * plain.associations as f64, "{seeded:?} {plain:?}");
+    assert!(d.translation.vector.norm() < 2e-3 && d.rotation.angle() < 5e-3, "{d:?}");
+    // A failed registration leaves no memory: the next starts from scratch.
+    let unrelated = map_of_image(&vec![128; W * H * 3], &vec![0; W * H]);
+    assert!(register(&model, &unrelated, &start, &params, &mut remembering).is_err());
+    let after = register(&model, &scene, &start, &params, &mut remembering);
+    assert_eq!(format!("{after:?}"), format!("{:?}", register(&model, &scene, &start, &params, &mut fresh_ws())));
+    assert!(remembering.seeds.iter().all(|&s| s == NONE));
 }

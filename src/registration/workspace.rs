@@ -231,6 +231,28 @@ impl RegistrationWorkspace {
         }
     }
 
+    /// Forgets the remembered matches: the next registration has no seeds (a tracker
+    /// after a registration it rejected, or when it restarts from another pose).
+    pub fn forget_matches(&mut self) {
+        self.remembered.clear();
+        self.remembered_levels = [(0, 0); MAX_LEVELS];
+    }
+
+    /// Plants the seeds that are model nodes of their scene node's level as the
+    /// previous matches of the first association pass (its searches then visit their
+    /// neighbourhoods: `RegistrationParams::start_from_last_matches`). Whether any was
+    /// planted.
+    pub(crate) fn plant_seeds(&mut self, scene: &SurfelMap, model: &SurfelMap) -> bool {
+        let mut planted = false;
+        for ((a, &seed), node) in self.assoc.iter_mut().zip(&self.seeds).zip(scene.nodes()) {
+            if model.nodes().get(seed as usize).is_some_and(|m| m.level == node.level) {
+                a.model_node = seed;
+                planted = true;
+            }
+        }
+        planted
+    }
+
     /// Remembers the matches of `scene`'s nodes (see [`Self::remember_matches`]).
     pub(crate) fn remember_matches_of(&mut self, scene: &SurfelMap) {
         if !self.remember {

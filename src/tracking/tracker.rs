@@ -293,7 +293,12 @@ impl Tracker {
             Err(_) => (0.0, 0.0),
         };
         let min_quality = if object.tracking { p.min_quality } else { p.min_quality_initialise };
-        Attempt { good: quality >= min_quality && free_space <= p.max_free_space, result, quality, free_space }
+        let good = quality >= min_quality && free_space <= p.max_free_space;
+        if !good {
+            // The next registration starts without this one's matches.
+            object.workspace.forget_matches();
+        }
+        Attempt { good, result, quality, free_space }
     }
 
     /// Whether a failed registration of object `k` is tried again from its last pose:
@@ -318,6 +323,7 @@ impl Tracker {
         object.bad_frames = 0;
         object.motion = Pose::identity();
         object.requested = Some(camera_from_object.inverse());
+        object.workspace.forget_matches();
     }
 
     /// Forgets every object's state: tracking restarts from the initial poses.
@@ -333,6 +339,7 @@ impl Tracker {
             object.carried_stamp_ns = 0;
             object.good_stamp_ns = None;
             object.measured_motion = None;
+            object.workspace.forget_matches();
         }
     }
 }
