@@ -76,7 +76,11 @@ echo "  with a perfect detector after each loss:"
 # recorded in docs/evaluation.md):
 # frames estimated at least, ATE median at most (mm; the bottle's turn about its axis
 # is free, so its ATE is not guarded), precision and recall at least, gross failures
-# (> 200 mm) accepted at most.
+# (> 200 mm) accepted at most. The perturbed starts: 8 per frame. The gross failures
+# accepted are rare events: with 2 starts per frame (until 2026-12-07) their count was
+# a coin flip (stop 83's build: Suzanne 2-16 over seeds 1-8 against a limit of 3). Their
+# limits are the worst count of seeds 1-8 with stop 83's build at 8 starts per frame
+# (docs/evaluation.md, "Objects a gripper picks up").
 while read -r o min_fresh max_ate min_precision min_recall max_gross; do
   block=$(sed -n "/^$o:/,/^[a-z]*:/p" "$OUT/track.log")
   counts=$(echo "$block" | sed -nE "s/^$o: ([0-9]+) frames tracking \(([0-9]+) held\), ([0-9]+) lost, ([0-9]+) initialising.*/\1 \2 \3 \4/p")
@@ -87,7 +91,7 @@ while read -r o min_fresh max_ate min_precision min_recall max_gross; do
   reinit=$(echo "$block" | sed -nE 's/.*re-initialised at the ground truth before ([0-9]+) frames.*/\1/p')
   if [ "$fresh" -ge 3 ]; then
     quality=$($BIN eval tracking-quality --config "$OUT/only_$o.toml" --dataset "$OUT/track" --camera $CAMERA \
-      --first-frame 0 --frames "$frames" --trials 2 2>&1) || quality="error: $quality"
+      --first-frame 0 --frames "$frames" --trials 8 2>&1) || quality="error: $quality"
     rule=$(echo "$quality" | { grep '(max_free_space)' || true; } | awk -F'|' '{print $4, $5, $7}')
     trials=$(echo "$quality" | sed -nE 's/^([0-9]+) registrations from priors.* ([0-9]+) failed .*/\2 of \1 failed/p')
   else
@@ -105,10 +109,10 @@ while read -r o min_fresh max_ate min_precision min_recall max_gross; do
   fi
 done <<'TABLE'
 banana   140 25  0.9 0.9  0
-scissors 130 15  0.9 0.9  0
-bottle   200 -   0.9 0.9  3
-cow      250 8   0.9 0.85 2
-monkey   65  12  0.9 0.85 3
+scissors 130 15  0.9 0.9  1
+bottle   200 -   0.9 0.9  9
+cow      250 8   0.9 0.85 5
+monkey   65  12  0.9 0.85 20
 TABLE
 
 # The colour term (`color_term = true` on the object; not in the paper): the bottle's
