@@ -37,9 +37,9 @@ fn tracks_loses_and_reinitialises() {
 }
 
 #[test]
-fn tracks_loses_and_reinitialises_starting_each_frame_from_the_last_matches() {
+fn tracks_loses_and_reinitialises_starting_each_frame_from_scratch() {
     let mut params = TrackerParams::default();
-    params.registration.start_from_last_matches = true;
+    params.registration.start_from_last_matches = false;
     tracks_loses_and_reinitialises_with(params);
 }
 

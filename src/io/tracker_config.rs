@@ -440,11 +440,11 @@ mod tests {
     }
 
     #[test]
-    fn the_first_pass_from_the_last_matches_is_asked_for() {
+    fn the_first_pass_from_the_last_matches_can_be_switched_off() {
         let p = Path::new("t.toml");
-        assert!(!parse_tracker_config(GOOD, p).expect("valid").params.registration.start_from_last_matches);
-        let on = GOOD.replace("[camera]", "[tracker]\nstart_from_last_matches = true\n[camera]");
-        assert!(parse_tracker_config(&on, p).expect("valid").params.registration.start_from_last_matches);
+        assert!(parse_tracker_config(GOOD, p).expect("valid").params.registration.start_from_last_matches);
+        let off = GOOD.replace("[camera]", "[tracker]\nstart_from_last_matches = false\n[camera]");
+        assert!(!parse_tracker_config(&off, p).expect("valid").params.registration.start_from_last_matches);
         let typed = GOOD.replace("[camera]", "[tracker]\nstart_from_last_matches = \"yes\"\n[camera]");
         assert!(parse_tracker_config(&typed, p).unwrap_err().to_string().contains("start_from_last_matches"));
     }

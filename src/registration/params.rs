@@ -80,7 +80,7 @@ pub struct RegistrationParams {
     /// Without a memory the first pass searches from scratch as before. Trajectories
     /// change; measured on fr3_teddy tracking: 2–5 % of the step's time, ATE as good
     /// (docs/benchmarks.md, "Trading accuracy for time in the tracker"). Off by
-    /// default, in the tracker too (docs/benchmarks.md, "Stop 84's change", says why).
+    /// default, on in the tracker (`TrackerParams::default`).
     pub start_from_last_matches: bool,
     /// Interpolate model surfels trilinearly in the Newton stage (§4.3).
     pub interpolate: bool,

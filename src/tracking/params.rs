@@ -141,6 +141,10 @@ impl Default for TrackerParams {
                 // The tracker's small steps are often rejected: test them before the
                 // search from scratch (same results, −3.5 % registration instructions).
                 test_small_steps_first: true,
+                // Each frame's first association pass around the last frame's matches
+                // (not in the paper): 2–5 % of the step, as accurate (docs/benchmarks.md,
+                // "Stop 84's change").
+                start_from_last_matches: true,
                 ..RegistrationParams::default()
             },
             gate_mahalanobis2: 12.0,
