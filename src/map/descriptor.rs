@@ -12,7 +12,7 @@
 //! The original code weights neighbours by their un-normalised totals (so large
 //! neighbours dominate quadratically); we use the normalised form described in the paper.
 
-use super::evaluate::CHUNK;
+use super::evaluate::{CHUNK, kept_entries};
 use super::jobs::ItemJobs;
 use super::tree::{NONE, SELF_NEIGHBOR};
 use super::{Surfel, SurfelMap};
@@ -91,16 +91,17 @@ fn normalize_rows(h: &mut Descriptor) {
     }
 }
 
-/// The valid surfels among a surfel's 26 same-direction neighbours.
+/// The valid surfels among a surfel's 26 same-direction neighbours, in row order, found
+/// without a branch per neighbour ([`kept_entries`]; `surfels` is not empty: the row is
+/// one of its surfels').
 #[inline]
-fn neighbor_surfels<'a>(surfels: &'a [Surfel], row: &'a [u32; 27]) -> impl Iterator<Item = (u32, &'a Surfel)> + 'a {
-    row.iter().enumerate().filter_map(move |(k, &s)| {
-        if k == SELF_NEIGHBOR || s == NONE {
-            return None;
-        }
-        let sf = &surfels[s as usize];
-        sf.valid.then_some((s, sf))
-    })
+fn neighbor_surfels<'a>(surfels: &'a [Surfel], row: &[u32; 27]) -> impl Iterator<Item = (u32, &'a Surfel)> + 'a {
+    let last = surfels.len().saturating_sub(1);
+    let (kept, n) = kept_entries(row, |k, s| {
+        // An absent neighbour's flag is read from another surfel and not used.
+        (k != SELF_NEIGHBOR) & (s != NONE) & surfels[(s as usize).min(last)].valid
+    });
+    (0..n).map(move |i| (kept[i], &surfels[kept[i] as usize]))
 }
 
 /// Computes the descriptors of all usable surfels, the only ones association compares

@@ -17,14 +17,41 @@ pub(crate) fn surfel_neighborhoods(map: &mut SurfelMap) {
     // Every row is written below.
     super::resize_for_overwrite(&mut map.surfel_neighbors, [NONE; 27], n);
     let (nodes, neighbors, surfels) = (&map.tree.nodes, &map.tree.neighbors, &map.surfels);
+    // A surfel has a node, so there is one to read in place of an absent neighbour.
+    let last_node = nodes.len().saturating_sub(1);
     map.surfel_neighbors.par_chunks_mut(CHUNK).enumerate().item_jobs().for_each(|(c, out)| {
         for (k, row) in out.iter_mut().enumerate() {
             let s = &surfels[c * CHUNK + k];
             for (slot, &nb) in row.iter_mut().zip(&neighbors[s.node as usize]) {
-                *slot = if nb == NONE { NONE } else { nodes[nb as usize].surfels[s.dir as usize] };
+                // Read whether or not the neighbour exists, then select by a mask: no
+                // branch on which neighbours exist (see [`kept_entries`]). The mask is
+                // opaque to the compiler (`black_box`), which otherwise turns the
+                // selection back into a branch (an absent neighbour's entry is its own).
+                let surfel = nodes[(nb as usize).min(last_node)].surfels[s.dir as usize];
+                let exists = std::hint::black_box(u32::from(nb != NONE)).wrapping_neg();
+                *slot = (surfel & exists) | !exists;
             }
         }
     });
+}
+
+/// The entries of a 27-neighbour row that `keep` accepts (given the entry's position
+/// and value), in row order: an array and the number of its entries in use. Every entry
+/// is stored and the count grows by whether it is kept, so that no branch depends on
+/// which neighbours exist: that follows no pattern a branch predictor learns, and the
+/// loops over the rows of the scene map (normals, descriptors) spent more time on
+/// mispredicted branches than on their arithmetic (docs/benchmarks.md, stop 85). `keep`
+/// should be branch-free too (`&`, not `&&`).
+#[inline(always)]
+pub(crate) fn kept_entries(row: &[u32; 27], keep: impl Fn(usize, u32) -> bool) -> ([u32; 27], usize) {
+    let mut out = [NONE; 27];
+    let mut n = 0;
+    for (k, &entry) in row.iter().enumerate() {
+        // `n ≤ k`: in range.
+        out[n.min(26)] = entry;
+        n += usize::from(keep(k, entry));
+    }
+    (out, n)
 }
 
 /// Surfels per parallel work item (fixed, so that work splits do not depend on threads;
@@ -205,7 +232,8 @@ pub(crate) fn estimate_normals(map: &mut SurfelMap, raw: &[RawMoments]) {
                 let idx = c * CHUNK + k;
                 let cov: Matrix3<f64> = if smooth {
                     let mut sum = RawMoments::default();
-                    for &ns in surfel_neighbors[c * CHUNK + k].iter().filter(|&&n| n != NONE) {
+                    let (kept, n) = kept_entries(&surfel_neighbors[idx], |_, ns| ns != NONE);
+                    for &ns in &kept[..n] {
                         sum.add(&raw[ns as usize]);
                     }
                     sum.covariance()
@@ -235,6 +263,23 @@ mod tests {
     use super::*;
     use crate::synthetic::Pcg32;
     use nalgebra::Rotation3;
+
+    /// The branch-free selection keeps what a filter keeps, in the same order: over rows
+    /// of every density of absent entries, with a condition on position and value.
+    #[test]
+    fn kept_entries_are_the_filtered_row() {
+        let mut rng = Pcg32::new(5);
+        for case in 0..2000 {
+            let absent = (case % 11) as f64 / 10.0;
+            let row: [u32; 27] = std::array::from_fn(|_| {
+                if rng.uniform(0.0, 1.0) < absent { NONE } else { rng.uniform(0.0, 1000.0) as u32 }
+            });
+            let keep = |k: usize, e: u32| (k != 13) & (e != NONE) & !e.is_multiple_of(3);
+            let (kept, n) = kept_entries(&row, keep);
+            let filtered: Vec<u32> = row.iter().enumerate().filter(|&(k, &e)| keep(k, e)).map(|(_, &e)| e).collect();
+            assert_eq!(&kept[..n], &filtered[..], "row {row:?}");
+        }
+    }
 
     /// A rotated covariance with eigenvalues `scale · rel`.
     fn covariance(rng: &mut Pcg32, scale: f64, rel: [f64; 3]) -> Matrix3<f64> {
