@@ -25,8 +25,8 @@ pub(crate) fn surfel_neighborhoods(map: &mut SurfelMap) {
             for (slot, &nb) in row.iter_mut().zip(&neighbors[s.node as usize]) {
                 // Read whether or not the neighbour exists, then select by a mask: no
                 // branch on which neighbours exist (see [`kept_entries`]). The mask is
-                // opaque to the compiler (`black_box`), which otherwise turns the
-                // selection back into a branch (an absent neighbour's entry is its own).
+                // opaque to the compiler (`black_box`): written plainly, the compiler saw
+                // that an absent neighbour's entry equals its index (`NONE`) and branched.
                 let surfel = nodes[(nb as usize).min(last_node)].surfels[s.dir as usize];
                 let exists = std::hint::black_box(u32::from(nb != NONE)).wrapping_neg();
                 *slot = (surfel & exists) | !exists;
