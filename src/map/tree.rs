@@ -33,6 +33,32 @@ pub(crate) const NEIGHBOR_OFFSETS: [[i32; 3]; 27] = {
     out
 };
 
+/// The entries of a 27-neighbourhood row that hold a node, but for the node itself, as
+/// bits `1 << k`; [`set_bits`] lists them. Loops over the neighbours that exist
+/// use it instead of a branch per entry: which exist follows the surface, a pattern no
+/// branch predictor learns.
+#[inline(always)]
+pub(crate) fn existing_neighbors(row: &[u32; 27]) -> u32 {
+    let mut bits = 0;
+    for (k, &m) in row.iter().enumerate() {
+        bits |= u32::from(m != NONE) << k;
+    }
+    bits & !(1 << SELF_NEIGHBOR)
+}
+
+/// The indices `k` of the bits `1 << k` of `bits`, ascending (a loop over them
+/// branches once per index and once at its end, not per bit that is clear).
+#[inline(always)]
+pub(crate) fn set_bits(mut bits: u32) -> impl Iterator<Item = usize> {
+    std::iter::from_fn(move || {
+        (bits != 0).then(|| {
+            let k = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            k
+        })
+    })
+}
+
 /// Octant of a key within its parent: `4·(x & 1) + 2·(y & 1) + (z & 1)`.
 #[inline]
 pub const fn octant(key: [i32; 3]) -> usize {
@@ -427,6 +453,18 @@ fn neighbors_from_parent(nodes: &[Node], coarser_neighbors: &[[u32; 27]], i: usi
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn existing_neighbors_lists_the_nodes_of_a_row_but_itself_in_order() {
+        let mut row = [NONE; 27];
+        for (k, m) in [(0, 7), (5, 3), (SELF_NEIGHBOR, 1), (20, 9), (26, 4)] {
+            row[k] = m;
+        }
+        let listed: Vec<(usize, u32)> = set_bits(existing_neighbors(&row)).map(|k| (k, row[k])).collect();
+        assert_eq!(listed, [(0, 7), (5, 3), (20, 9), (26, 4)]);
+        assert_eq!(set_bits(existing_neighbors(&[NONE; 27])).count(), 0);
+        assert_eq!(set_bits(existing_neighbors(&[0; 27])).count(), 26);
+    }
 
     #[test]
     fn neighbor_offsets_invert_neighbor_index() {

@@ -22,10 +22,21 @@ use super::workspace::{Association, NODE_CHUNK, Partial, PassState};
 use crate::frame::rays::VIEW_AXES;
 use crate::geometry::Pose;
 use crate::map::jobs::ItemJobs;
-use crate::map::tree::NEIGHBOR_OFFSETS;
+use crate::map::tree::{NEIGHBOR_OFFSETS, existing_neighbors, set_bits};
 use crate::map::{MAX_LEVELS, NONE, Node, SELF_NEIGHBOR, descriptor_distance2};
 use nalgebra::Vector3;
 use rayon::prelude::*;
+
+/// Per neighbour index `9a + 3b + c`: `[a, b, c]`.
+const NEIGHBOR_AXES: [[u8; 3]; 27] = {
+    let mut axes = [[0; 3]; 27];
+    let mut k = 0;
+    while k < 27 {
+        axes[k] = [(k / 9) as u8, (k / 3 % 3) as u8, (k % 3) as u8];
+        k += 1;
+    }
+    axes
+};
 
 /// Per scene view direction, the model view directions within the angle gate, best
 /// first (they depend on the rotation only).
@@ -178,7 +189,9 @@ fn associate_node(
     }
     // At most one surfel per view direction: six fit, without initialising the storage.
     let mut transformed: heapless::Vec<Transformed, 6> = heapless::Vec::new();
-    for &s in node.surfels.iter().filter(|&&s| s != NONE) {
+    // The slots that hold a surfel, without a branch per slot.
+    let slots = node.surfels.iter().enumerate().fold(0, |bits, (d, &s)| bits | u32::from(s != NONE) << d);
+    for s in set_bits(slots).map(|d| node.surfels[d]) {
         let sf = &scene.surfels()[s as usize];
         if sf.usable() {
             let mean = sf.mean.cast::<f64>();
@@ -457,34 +470,36 @@ impl Search<'_> {
     /// per axis, the smallest squared distance of any transformed mean to each slab of
     /// cells bounds the distance to a cell from below (as in [`Search::cube`]). The same
     /// cells are tested as by visiting all 27, in the same order, so the match is the
-    /// same; the lower bound kept for the cache (`second`) can be smaller, which is safe.
+    /// same; the lower bound kept for the cache (`second`) is the smallest bound of the
+    /// cells skipped, which is safe.
+    ///
+    /// The neighbours that exist are found first, without a branch per neighbour
+    /// ([`existing_neighbors`]).
     fn neighbourhood(&mut self, key: [i32; 3], neighbors: &[u32; 27]) {
         self.visit(neighbors[SELF_NEIGHBOR], key);
         let slab = self.slabs([key[0] - 1, key[1] - 1, key[2] - 1], [3; 3]);
-        let index = |j: [usize; 3]| 9 * j[0] + 3 * j[1] + j[2];
-        self.visit_grid(
-            &slab,
-            [3; 3],
-            |j| index(j) == SELF_NEIGHBOR || neighbors[index(j)] == NONE,
-            |j| {
-                let k = index(j);
-                let o = NEIGHBOR_OFFSETS[k];
-                Some((neighbors[k], [key[0] + o[0], key[1] + o[1], key[2] + o[2]]))
-            },
-        );
+        for k in set_bits(existing_neighbors(neighbors)) {
+            // As `Search::visit_grid` sums them.
+            let [a, b, c] = NEIGHBOR_AXES[k];
+            let d = slab[0][a as usize] + slab[1][b as usize] + slab[2][c as usize];
+            if d >= self.best {
+                self.second = min_of(self.second, d);
+                continue;
+            }
+            let o = NEIGHBOR_OFFSETS[k];
+            self.visit_below_bound(neighbors[k], [key[0] + o[0], key[1] + o[1], key[2] + o[2]]);
+        }
     }
 
     /// Visits, in index order, the cells `j < n` of a grid of slab bounds `slab` (see
     /// [`Search::slabs`]), skipping before any memory read the planes, rows and cells
-    /// that cannot beat the best match (their bound lowers `second`, the cache's bound).
-    /// A cell that `known_empty` (decided without a memory read of the model) passes
-    /// over is skipped without that; the others are visited if `cell` gives their node
-    /// and key (`None`: no node, or visited already).
+    /// that cannot beat the best match (their bound lowers `second`, the cache's bound);
+    /// the others are visited if `cell` gives their node and key (`None`: no node, or
+    /// visited already).
     fn visit_grid(
         &mut self,
         slab: &[[f64; 5]; 3],
         n: [usize; 3],
-        known_empty: impl Fn([usize; 3]) -> bool,
         cell: impl Fn([usize; 3]) -> Option<(u32, [i32; 3])>,
     ) {
         // (`second` is never NaN, nor are the bounds: `min_of` is `f64::min` here.)
@@ -500,9 +515,6 @@ impl Search<'_> {
                     continue;
                 }
                 for (c, &dz) in slab[2][..n[2].min(5)].iter().enumerate() {
-                    if known_empty([a, b, c]) {
-                        continue;
-                    }
                     let d = dxy + dz;
                     if d >= self.best {
                         self.second = min_of(self.second, d);
@@ -575,16 +587,11 @@ impl Search<'_> {
         // slab: their sum bounds the distance to a cell from below.
         let slab = self.slabs(lo, n);
         // Cells are looked up only when their bound is below the best match.
-        self.visit_grid(
-            &slab,
-            n,
-            |_| false,
-            |j| {
-                let here = flat(j);
-                let m = if here != visited_centre && here != visited_seed { cells.get(j) } else { None };
-                m.map(|m| (m, [lo[0] + j[0] as i32, lo[1] + j[1] as i32, lo[2] + j[2] as i32]))
-            },
-        );
+        self.visit_grid(&slab, n, |j| {
+            let here = flat(j);
+            let m = if here != visited_centre && here != visited_seed { cells.get(j) } else { None };
+            m.map(|m| (m, [lo[0] + j[0] as i32, lo[1] + j[1] as i32, lo[2] + j[2] as i32]))
+        });
         if !self.found.is_matched() {
             self.bound_without_match(&cells, n);
         }

@@ -13,7 +13,8 @@ use super::associate::DirCandidates;
 use super::cost::{rotate_symmetric, symmetric_inverse};
 use crate::geometry::Pose;
 use crate::map::jobs::ItemJobs;
-use crate::map::{NONE, SELF_NEIGHBOR, SurfelMap};
+use crate::map::tree::{existing_neighbors, set_bits};
+use crate::map::{NONE, SurfelMap};
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 
@@ -159,14 +160,10 @@ fn best_match(
     // The centre cell first: its surfels are the likeliest best, and the earlier a good
     // match is found, the more of the other candidates the bound below skips (the
     // minimum does not depend on the order).
+    // Then the neighbours that exist, in index order, found without a branch per
+    // neighbour (`existing_neighbors`).
     let around = b.neighbors(center);
-    for k in std::iter::once(SELF_NEIGHBOR).chain((0..27).filter(|&k| k != SELF_NEIGHBOR)) {
-        // `around[SELF_NEIGHBOR]` is `center` too; naming it lets the compiler peel
-        // the first pass (1.2 % fewer instructions in the score, measured).
-        let m = if k == SELF_NEIGHBOR { center } else { around[k] };
-        if m == NONE {
-            continue;
-        }
+    for m in std::iter::once(center).chain(set_bits(existing_neighbors(around)).map(|k| around[k])) {
         let slots = &b.nodes()[m as usize].surfels;
         for &dir in dirs {
             let sb = slots[dir as usize];
