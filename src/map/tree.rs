@@ -33,17 +33,25 @@ pub(crate) const NEIGHBOR_OFFSETS: [[i32; 3]; 27] = {
     out
 };
 
-/// The entries of a 27-neighbourhood row that hold a node, but for the node itself, as
-/// bits `1 << k`; [`set_bits`] lists them. Loops over the neighbours that exist
-/// use it instead of a branch per entry: which exist follows the surface, a pattern no
-/// branch predictor learns.
+/// The entries that are not `NONE` (nodes of a neighbourhood row, a node's surfel
+/// slots), as bits `1 << k`, found without a branch per entry; [`set_bits`] lists them.
+/// Loops over what exists use it instead of a branch per entry: which entries exist
+/// follows the surface, a pattern no branch predictor learns.
 #[inline(always)]
-pub(crate) fn existing_neighbors(row: &[u32; 27]) -> u32 {
+pub(crate) fn present_entries<const N: usize>(entries: &[u32; N]) -> u32 {
+    const { assert!(N <= 32) };
     let mut bits = 0;
-    for (k, &m) in row.iter().enumerate() {
+    for (k, &m) in entries.iter().enumerate() {
         bits |= u32::from(m != NONE) << k;
     }
-    bits & !(1 << SELF_NEIGHBOR)
+    bits
+}
+
+/// The entries of a 27-neighbourhood row that hold a node, but for the node itself
+/// ([`present_entries`]).
+#[inline(always)]
+pub(crate) fn existing_neighbors(row: &[u32; 27]) -> u32 {
+    present_entries(row) & !(1 << SELF_NEIGHBOR)
 }
 
 /// The indices `k` of the bits `1 << k` of `bits`, ascending (a loop over them

@@ -22,7 +22,7 @@ use super::workspace::{Association, NODE_CHUNK, Partial, PassState};
 use crate::frame::rays::VIEW_AXES;
 use crate::geometry::Pose;
 use crate::map::jobs::ItemJobs;
-use crate::map::tree::{NEIGHBOR_OFFSETS, existing_neighbors, set_bits};
+use crate::map::tree::{NEIGHBOR_OFFSETS, existing_neighbors, present_entries, set_bits};
 use crate::map::{MAX_LEVELS, NONE, Node, SELF_NEIGHBOR, descriptor_distance2};
 use nalgebra::Vector3;
 use rayon::prelude::*;
@@ -192,8 +192,7 @@ fn associate_node(
     // At most one surfel per view direction: six fit, without initialising the storage.
     let mut transformed: heapless::Vec<Transformed, 6> = heapless::Vec::new();
     // The slots that hold a surfel, without a branch per slot.
-    let slots = node.surfels.iter().enumerate().fold(0, |bits, (d, &s)| bits | u32::from(s != NONE) << d);
-    for s in set_bits(slots).map(|d| node.surfels[d]) {
+    for s in set_bits(present_entries(&node.surfels)).map(|d| node.surfels[d]) {
         let sf = &scene.surfels()[s as usize];
         if sf.usable() {
             let mean = sf.mean.cast::<f64>();
