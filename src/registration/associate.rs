@@ -478,7 +478,7 @@ impl Search<'_> {
     /// ([`existing_neighbors`]).
     fn neighbourhood(&mut self, key: [i32; 3], neighbors: &[u32; 27]) {
         self.visit(neighbors[SELF_NEIGHBOR], key);
-        let slab = self.slabs([key[0] - 1, key[1] - 1, key[2] - 1], [3; 3]);
+        let slab = self.slabs::<3>([key[0] - 1, key[1] - 1, key[2] - 1]);
         for k in set_bits(existing_neighbors(neighbors)) {
             // As `Search::visit_grid` sums them.
             let [a, b, c] = NEIGHBOR_AXES[k];
@@ -529,19 +529,18 @@ impl Search<'_> {
         }
     }
 
-    /// Per axis `i` and cell `j < n[i]` from `lo[i]`: the smallest squared distance of
-    /// any transformed mean to that slab of cells (infinite beyond `n[i]`).
-    fn slabs(&self, lo: [i32; 3], n: [usize; 3]) -> [[f64; 5]; 3] {
-        let mut slab = [[f64::INFINITY; 5]; 3];
+    /// Per axis `i` and cell `j < N` from `lo[i]`: the smallest squared distance of any
+    /// transformed mean to that slab of cells. All `N` cells of an axis at once, in lanes
+    /// (the compiler keeps them in vector registers); a cube search reads only its `n`.
+    fn slabs<const N: usize>(&self, lo: [i32; 3]) -> [[f64; N]; 3] {
+        let mut slab = [[f64::INFINITY; N]; 3];
         for (i, axis) in slab.iter_mut().enumerate() {
-            for (j, v) in axis[..n[i].min(5)].iter_mut().enumerate() {
-                let cell_lo = (lo[i] + j as i32) as f64 * self.res;
-                let mut nearest = f64::INFINITY;
-                for (_, _, p, _) in self.transformed {
-                    let d = axis_distance(cell_lo, p[i], self.res);
-                    nearest = min_of(nearest, d * d);
+            let cell_lo: [f64; N] = std::array::from_fn(|j| (lo[i] + j as i32) as f64 * self.res);
+            for (_, _, p, _) in self.transformed {
+                for (v, &c) in axis.iter_mut().zip(&cell_lo) {
+                    let d = axis_distance(c, p[i], self.res);
+                    *v = min_of(*v, d * d);
                 }
-                *v = nearest;
             }
         }
         slab
@@ -586,7 +585,7 @@ impl Search<'_> {
         }
         // Per axis, the smallest squared distance of any transformed mean to each cell
         // slab: their sum bounds the distance to a cell from below.
-        let slab = self.slabs(lo, n);
+        let slab = self.slabs::<5>(lo);
         // Cells are looked up only when their bound is below the best match.
         self.visit_grid(&slab, n, |j| {
             let here = flat(j);
