@@ -535,7 +535,9 @@ impl Search<'_> {
     fn slabs<const N: usize>(&self, lo: [i32; 3]) -> [[f64; N]; 3] {
         let mut slab = [[f64::INFINITY; N]; 3];
         for (i, axis) in slab.iter_mut().enumerate() {
-            let cell_lo: [f64; N] = std::array::from_fn(|j| (lo[i] + j as i32) as f64 * self.res);
+            // (Wrapping: a cube's cells beyond its extent, never read, may lie past the
+            // key range where a pose has sent a point far away.)
+            let cell_lo: [f64; N] = std::array::from_fn(|j| lo[i].wrapping_add(j as i32) as f64 * self.res);
             for (_, _, p, _) in self.transformed {
                 for (v, &c) in axis.iter_mut().zip(&cell_lo) {
                     let d = axis_distance(c, p[i], self.res);

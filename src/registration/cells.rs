@@ -47,10 +47,8 @@ impl<'a> CubeCells<'a> {
         };
         let mut neighbor_part = [[0u8; 5]; 3];
         let mut octant_part = [[0u8; 5]; 3];
-        // All five cells per axis, also beyond `n` (never read there): a fixed-length
-        // loop the compiler unrolls.
         for i in 0..3 {
-            for j in 0..5 {
+            for j in 0..n[i] {
                 let k = lo[i] + j as i32;
                 // The other axes at offset −1 and key 0 add nothing to either sum.
                 let d = (k >> 1) - (k0[i] >> 1);
