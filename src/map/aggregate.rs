@@ -18,7 +18,8 @@
 
 use super::gate_cells::CellGate;
 use super::params::MAX_LEVELS;
-use super::region::{PixelGate, RowSpans};
+use super::region::PixelGate;
+use super::row_spans::RowSpans;
 use super::stats::{PACKED6, SurfelStats, packed_index};
 use crate::frame::{PixelRay, RgbdFrame};
 use crate::geometry::color::rgb8_to_lab;

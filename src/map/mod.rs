@@ -21,6 +21,7 @@ pub mod params;
 mod radix;
 pub mod region;
 mod restore;
+pub mod row_spans;
 pub mod stats;
 pub mod tree;
 
@@ -28,8 +29,9 @@ pub use build::{BuildReport, MapBuilder, MapError, PlacedFrame};
 pub use descriptor::{DESCRIPTOR_LEN, Descriptor, descriptor_distance2};
 pub use gate_cells::{CellGate, GateCells};
 pub use params::{MAX_LEVELS, MapCapacity, MapParams, MapParamsError, SCALED_MIN_POINTS_FLOOR};
-pub use region::{GateVolume, ImageRegion, MAX_GATE_CORNERS, PixelGate, PolygonEdge, RayEllipsoid, RowSpans};
+pub use region::{GateVolume, ImageRegion, MAX_GATE_CORNERS, PixelGate, PolygonEdge};
 pub use restore::{MapParts, RestoreError};
+pub use row_spans::{RayEllipsoid, RowSpans};
 pub use stats::SurfelStats;
 pub use tree::{NONE, Node, NodeArena, SELF_NEIGHBOR, neighbor_index};
 

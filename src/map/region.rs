@@ -3,6 +3,7 @@
 //! object's last pose, and only points likely under the model's spatial distribution).
 
 use super::gate_cells::GateCells;
+use super::row_spans::RowSpans;
 use nalgebra::{Matrix3, Vector3};
 use std::ops::Range;
 
@@ -235,102 +236,6 @@ fn first_where(mut lo: usize, mut hi: usize, pred: impl Fn(usize) -> bool) -> us
         if pred(mid) { hi = mid } else { lo = mid + 1 }
     }
     lo
-}
-
-/// The gate's ellipsoid as the rays of a pinhole camera meet it: the ray `r` meets
-/// `(x − c)ᵀ A (x − c) ≤ 1` (camera frame) where `(rᵀAc)² ≥ rᵀAr · (cᵀAc − 1)`.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct RayEllipsoid {
-    /// `A`: the inverse of the ellipsoid's shape (1/m²).
-    pub a: Matrix3<f64>,
-    /// `A c`, `c` the centre (camera frame).
-    pub ac: Vector3<f64>,
-    /// `cᵀAc − 1` (positive: the camera is outside).
-    pub kappa: f64,
-}
-
-/// Per image row, the columns whose rays can meet the gate's box and ellipsoid, for a
-/// pinhole camera: the pixels outside them give no point the gate keeps and are skipped
-/// before any work. Built from a box and an ellipsoid slightly larger than the gate's
-/// (`tracking::extent`), widened by [`RowSpans::SLACK_PX`]: a skipped pixel is one whose
-/// point the gate would reject.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct RowSpans {
-    /// `fx, fy, cx, cy` (pixels).
-    pub intrinsics: [f64; 4],
-    /// The box's corners projected into the image (pixels).
-    pub corners_px: [[f64; 2]; 8],
-    /// The ellipsoid, if its image is bounded (else only the box limits the rows).
-    pub ellipsoid: Option<RayEllipsoid>,
-}
-
-impl RowSpans {
-    /// Columns added on either side of a row's span, far beyond the rounding of the
-    /// spans and of the pixels' rays (micro-pixels).
-    pub const SLACK_PX: f64 = 2.0;
-
-    /// The columns of row `v`, within `cols`, whose rays can meet the gate.
-    pub fn columns(&self, v: usize, cols: &Range<usize>) -> Range<usize> {
-        let v = v as f64;
-        let (box_lo, box_hi) = self.box_span(v);
-        let (ell_lo, ell_hi) = self.ellipse_span(v);
-        let (lo, hi) = (box_lo.max(ell_lo) - Self::SLACK_PX, box_hi.min(ell_hi) + Self::SLACK_PX);
-        if lo.is_nan() || hi.is_nan() {
-            // Degenerate numbers: no pixel is skipped (the gate still decides).
-            return cols.clone();
-        }
-        if lo > hi {
-            return cols.start..cols.start;
-        }
-        let clamp = |x: f64| x.max(cols.start as f64).min(cols.end as f64) as usize;
-        let start = clamp(lo.floor());
-        start..clamp(hi.ceil() + 1.0).max(start)
-    }
-
-    /// Where the line `y = v` crosses the convex hull of the box's image: the extremes
-    /// of its crossings with the segments between corners (the hull is their union).
-    fn box_span(&self, v: f64) -> (f64, f64) {
-        let mut span = (f64::INFINITY, f64::NEG_INFINITY);
-        for (i, a) in self.corners_px.iter().enumerate() {
-            for b in &self.corners_px[i..] {
-                if (a[1] - v) * (b[1] - v) > 0.0 {
-                    continue;
-                }
-                let (x0, x1) = if a[1] == b[1] {
-                    (a[0].min(b[0]), a[0].max(b[0]))
-                } else {
-                    let x = a[0] + (v - a[1]) / (b[1] - a[1]) * (b[0] - a[0]);
-                    (x, x)
-                };
-                span = (span.0.min(x0), span.1.max(x1));
-            }
-        }
-        span
-    }
-
-    /// The columns of row `v` whose rays meet the ellipsoid: with `r = (a, b, 1)`, `a`
-    /// the pixel's normalised column, `(rᵀAc)² − κ rᵀAr ≥ 0` is a quadratic in `a`.
-    fn ellipse_span(&self, v: f64) -> (f64, f64) {
-        let [fx, fy, cx, cy] = self.intrinsics;
-        let Some(e) = &self.ellipsoid else { return (f64::NEG_INFINITY, f64::INFINITY) };
-        let (m, w, k) = (&e.a, &e.ac, e.kappa);
-        let b = (v - cy) / fy;
-        let lin = w[1] * b + w[2];
-        let q2 = w[0] * w[0] - k * m[(0, 0)];
-        let q1 = 2.0 * w[0] * lin - 2.0 * k * (m[(0, 1)] * b + m[(0, 2)]);
-        let q0 = lin * lin - k * (m[(1, 1)] * b * b + 2.0 * m[(1, 2)] * b + m[(2, 2)]);
-        if q2 >= 0.0 {
-            return (f64::NEG_INFINITY, f64::INFINITY);
-        }
-        let disc = q1 * q1 - 4.0 * q2 * q0;
-        if disc < 0.0 {
-            return (f64::INFINITY, f64::NEG_INFINITY);
-        }
-        // q2 < 0: the quadratic is non-negative between its roots.
-        let root = disc.sqrt();
-        let (a0, a1) = ((-q1 + root) / (2.0 * q2), (-q1 - root) / (2.0 * q2));
-        (fx * a0.min(a1) + cx, fx * a0.max(a1) + cx)
-    }
 }
 
 /// The part of an image that enters a map.

@@ -167,6 +167,9 @@ type Transformed = (u32, Vector3<f64>, Vector3<f64>, u8);
 
 /// Associates one scene node: `a` is its association, `last_cube` its last cube search
 /// (which a later fresh pass, after neighbourhood searches, may find still valid).
+/// Inlined into its one caller: whether the compiler does so on its own depends on how
+/// the crate is split into codegen units, and the call costs 2 % of the registration.
+#[inline(always)]
 fn associate_node(
     input: &AssociationInput,
     (passes, pass): (&[PassState], usize),

@@ -242,7 +242,7 @@ impl ModelExtent {
         let ac = a * centre;
         let kappa = centre.dot(&ac) - 1.0;
         let ellipsoid = (kappa > 0.0).then_some(RayEllipsoid { a, ac, kappa });
-        Some(RowSpans { intrinsics: [k.fx, k.fy, k.cx, k.cy], corners_px, ellipsoid })
+        Some(RowSpans::new([k.fx, k.fy, k.cx, k.cy], corners_px, ellipsoid))
     }
 }
 
