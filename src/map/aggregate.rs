@@ -126,15 +126,15 @@ fn level_of(r2: f32, thresholds_r2: &[f32; MAX_LEVELS]) -> usize {
 }
 
 /// Adds `v` to the moments: count, sums and the products of [`PRODUCTS`], with
-/// `color` all of them, else those of the position block.
+/// `COLOR` all of them, else those of the position block.
 #[inline(always)]
-fn accumulate(m: &mut Moments, v: &[f32; 6], color: bool) {
+fn accumulate<const COLOR: bool>(m: &mut Moments, v: &[f32; 6]) {
     m[0] += 1.0;
     for i in 0..6 {
         m[1 + i] += v[i];
     }
     add_products::<0, POSITION_PRODUCTS>(m, v);
-    if color {
+    if COLOR {
         add_products::<POSITION_PRODUCTS, PACKED6>(m, v);
     }
 }
@@ -274,23 +274,31 @@ impl Band {
 
     /// Aggregates the band's rows.
     pub(crate) fn aggregate(&mut self, input: &AggregationInput) {
+        if input.color_scatter { self.aggregate_as::<true>(input) } else { self.aggregate_as::<false>(input) }
+    }
+
+    /// [`Self::aggregate`] with `COLOR` = `input.color_scatter`.
+    fn aggregate_as<const COLOR: bool>(&mut self, input: &AggregationInput) {
         // One copy of the pixel loop per kind of input, each without the branches (and
-        // the register pressure) of the filters it does not have.
+        // the register pressure) of the filters and sums it does not have.
         match (input.gate.is_some(), input.placement.is_some(), input.smooth_view_dirs) {
-            (false, false, false) => self.aggregate_rows::<false, false, false>(input),
-            (true, false, false) => self.aggregate_rows::<true, false, false>(input),
-            (false, true, false) => self.aggregate_rows::<false, true, false>(input),
-            (true, true, false) => self.aggregate_rows::<true, true, false>(input),
-            (false, false, true) => self.aggregate_rows::<false, false, true>(input),
-            (true, false, true) => self.aggregate_rows::<true, false, true>(input),
-            (false, true, true) => self.aggregate_rows::<false, true, true>(input),
-            (true, true, true) => self.aggregate_rows::<true, true, true>(input),
+            (false, false, false) => self.aggregate_rows::<false, false, false, COLOR>(input),
+            (true, false, false) => self.aggregate_rows::<true, false, false, COLOR>(input),
+            (false, true, false) => self.aggregate_rows::<false, true, false, COLOR>(input),
+            (true, true, false) => self.aggregate_rows::<true, true, false, COLOR>(input),
+            (false, false, true) => self.aggregate_rows::<false, false, true, COLOR>(input),
+            (true, false, true) => self.aggregate_rows::<true, false, true, COLOR>(input),
+            (false, true, true) => self.aggregate_rows::<false, true, true, COLOR>(input),
+            (true, true, true) => self.aggregate_rows::<true, true, true, COLOR>(input),
         }
     }
 
-    /// [`Self::aggregate`] with `GATED` = `input.gate.is_some()`, `PLACED` =
+    /// [`Self::aggregate_as`] with `GATED` = `input.gate.is_some()`, `PLACED` =
     /// `input.placement.is_some()` and `SMOOTH` = `input.smooth_view_dirs`.
-    fn aggregate_rows<const GATED: bool, const PLACED: bool, const SMOOTH: bool>(&mut self, input: &AggregationInput) {
+    fn aggregate_rows<const GATED: bool, const PLACED: bool, const SMOOTH: bool, const COLOR: bool>(
+        &mut self,
+        input: &AggregationInput,
+    ) {
         self.aggregates.clear();
         self.moments.clear();
         self.dropped_points = 0;
@@ -339,7 +347,7 @@ impl Band {
                     continue;
                 }
                 let pixel = Pixel { depth: d, ray: &rays[i], flags: flags[i], rgb: &rgb[i] };
-                self.cur[u] = self.pixel::<GATED, PLACED, SMOOTH>(input, pixel, u, first_row, scale);
+                self.cur[u] = self.pixel::<GATED, PLACED, SMOOTH, COLOR>(input, pixel, u, first_row, scale);
                 i += 1;
             }
             std::mem::swap(&mut self.prev, &mut self.cur);
@@ -394,7 +402,7 @@ impl Band {
 
     /// Aggregates one pixel with a depth reading at column `u`.
     #[inline(always)]
-    fn pixel<const GATED: bool, const PLACED: bool, const SMOOTH: bool>(
+    fn pixel<const GATED: bool, const PLACED: bool, const SMOOTH: bool, const COLOR: bool>(
         &mut self,
         input: &AggregationInput,
         px: Pixel,
@@ -491,9 +499,8 @@ impl Band {
             moments: &mut self.moments,
             capacity: self.moments_capacity,
             dropped: &mut self.dropped_points,
-            color: input.color_scatter,
         };
-        pool.accumulate::<SMOOTH>(aggregate, best_dir, near_dirs, &rel);
+        pool.accumulate::<SMOOTH, COLOR>(aggregate, best_dir, near_dirs, &rel);
         (packed, agg)
     }
 }
@@ -504,16 +511,15 @@ struct MomentsPool<'a> {
     capacity: usize,
     /// Points dropped because the pool is full.
     dropped: &'a mut u32,
-    /// Sum the colour rows too (`MapParams::color_scatter`).
-    color: bool,
 }
 
 impl MomentsPool<'_> {
     /// Adds the point `rel` (relative to the aggregate's reference) to the aggregate's
     /// moments of its view directions: with `SMOOTH` every one in `near_dirs`, else
-    /// `best_dir` alone (§3.1).
+    /// `best_dir` alone (§3.1); with `COLOR` the colour rows too
+    /// (`MapParams::color_scatter`).
     #[inline(always)]
-    fn accumulate<const SMOOTH: bool>(
+    fn accumulate<const SMOOTH: bool, const COLOR: bool>(
         mut self,
         aggregate: &mut Aggregate,
         best_dir: u8,
@@ -526,7 +532,7 @@ impl MomentsPool<'_> {
             // 67.5° of the ray is its closest): no loop, so that the products stay in
             // registers.
             if let Some(slot) = self.slot(aggregate, dir) {
-                accumulate(&mut self.moments[slot as usize], rel, self.color);
+                accumulate::<COLOR>(&mut self.moments[slot as usize], rel);
             }
             return;
         }
@@ -535,7 +541,7 @@ impl MomentsPool<'_> {
             let dir = remaining.trailing_zeros() as usize;
             remaining &= remaining - 1;
             if let Some(slot) = self.slot(aggregate, dir) {
-                accumulate(&mut self.moments[slot as usize], rel, self.color);
+                accumulate::<COLOR>(&mut self.moments[slot as usize], rel);
             }
         }
     }
