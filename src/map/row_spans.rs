@@ -135,7 +135,8 @@ fn convex_hull(mut points: [[f64; 2]; 8]) -> ([[f64; 2]; 8], usize) {
             j -= 1;
         }
     }
-    // Whether `o → a → b` turns left (counter-clockwise).
+    // Whether `o → a → b` turns left (a positive cross product; either sense of turning
+    // gives the hull, in one order or the other).
     let left_turn =
         |o: [f64; 2], a: [f64; 2], b: [f64; 2]| (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]) > 0.0;
     // The lower chain left to right, then the upper one back; the last point pushed is
