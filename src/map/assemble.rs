@@ -7,7 +7,7 @@ use super::descriptor::{DESCRIPTOR_LEN, Descriptor, compute_descriptors};
 use super::evaluate::{CHUNK, RawMoments, estimate_normals, evaluate_beside_neighbors, surfel_neighborhoods};
 use super::jobs::ItemJobs;
 use super::params::MAX_LEVELS;
-use super::radix::{Coded, sort_by_code};
+use super::radix::{Coded, MortonCompaction, magnitude, sort_by_code};
 use super::stats::SurfelStats;
 use super::tree::{NONE, morton_code};
 use super::{Surfel, SurfelMap, resize_for_overwrite};
@@ -16,7 +16,8 @@ use rayon::prelude::*;
 /// Scratch for assembling (allocated once for frame maps; grows for fusion).
 #[derive(Debug, Default)]
 pub(crate) struct Assembly {
-    /// Aggregates in Morton order of their cells: `(code, band, index in band)`.
+    /// Aggregates in Morton order of their cells: `(code, band, index in band)`, the codes
+    /// shortened ([`MortonCompaction`]).
     order: Vec<Coded>,
     /// Scratch of the radix sort.
     order_scratch: Vec<Coded>,
@@ -77,16 +78,24 @@ impl Assembly {
     /// nodes — created in this order level by level — and their surfels are laid out
     /// in space-filling-curve order: registration then walks both maps with locality.
     /// Their cells are copied out in that order, for the passes that build the tree.
+    /// The codes are shortened to the bits that order them ([`MortonCompaction`]).
     fn sort_aggregates(&mut self, bands: &[Band]) {
+        let fine = |agg: &Aggregate| {
+            let l = agg.level as u32;
+            [agg.key[0] << l, agg.key[1] << l, agg.key[2] << l]
+        };
+        let magnitudes = bands
+            .iter()
+            .flat_map(|band| &band.aggregates)
+            .fold(0, |m, agg| fine(agg).iter().fold(m, |m, &v| m | magnitude(v)));
+        let compaction = MortonCompaction::new(magnitudes);
         self.order.clear();
         for (b, band) in bands.iter().enumerate() {
             for (i, agg) in band.aggregates.iter().enumerate() {
-                let l = agg.level as u32;
-                let fine = [agg.key[0] << l, agg.key[1] << l, agg.key[2] << l];
-                self.order.push((morton_code(fine), b as u32, i as u32));
+                self.order.push((compaction.apply(morton_code(fine(agg))), b as u32, i as u32));
             }
         }
-        sort_by_code(&mut self.order, &mut self.order_scratch);
+        sort_by_code(&mut self.order, &mut self.order_scratch, compaction.bits());
         self.cells.clear();
         self.cells.extend(self.order.iter().map(|&(_, b, i)| {
             let agg = &bands[b as usize].aggregates[i as usize];

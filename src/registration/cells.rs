@@ -27,6 +27,10 @@ pub(super) struct CubeCells<'a> {
 }
 
 impl<'a> CubeCells<'a> {
+    /// The cube of `n` cells per axis from `lo` at `level`, around the cell `k0`.
+    /// Inlined into the cube search, its one caller: some splits of the crate into
+    /// codegen units left it a call.
+    #[inline(always)]
     pub(super) fn new(
         model: &'a crate::map::SurfelMap,
         level: usize,
