@@ -8,9 +8,9 @@
 //! fresh data, the standard sort is the faster).
 //!
 //! The passes are only those over the bytes the codes can differ in. A map's cells lie
-//! near its origin (the camera, or the object), so most of a code's 63 bits are
-//! the same function of the key's signs for every cell: [`MortonCompaction`] drops those
-//! bits without changing the order, and a frame's codes fit in three or four bytes.
+//! near its origin (the camera, or the object), so most of a code's 63 bits depend only
+//! on the signs of the cell's key: [`MortonCompaction`] drops those bits without changing
+//! the order, and a frame's codes fit in three or four bytes.
 
 /// An aggregate's Morton code, band and index in the band.
 pub(crate) type Coded = (u64, u32, u32);
